@@ -1,0 +1,210 @@
+"""Generate MJCF files and leg maps from a `LegDesign` (dm_control's mjcf).
+
+`python -m legcal_bench.robots.build` rewrites `assets/`; a test checks that the
+committed files equal what this module generates, so the design stays the source.
+"""
+
+from __future__ import annotations
+
+import os
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np
+import yaml
+from dm_control import mjcf
+
+from legcal_bench.io_utils import atomic_write_text
+from legcal_bench.robots.design import DESIGNS, LEG_ROLES, ROLE_AXIS, LegDesign
+from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, Joint, Leg, LegMap
+
+ASSETS = Path(__file__).parent / "assets"
+
+
+def _mirror(v, side: str):
+    return (v[0], v[1] if side == "left" else 0.0 - v[1], v[2])
+
+
+def _box_inertia(mass: float, half: tuple[float, float, float]) -> list[float]:
+    a, b, c = (2 * h for h in half)
+    return [mass * (b * b + c * c) / 12, mass * (a * a + c * c) / 12, mass * (a * a + b * b) / 12]
+
+
+def _link_inertial(body, mass: float, to_child) -> None:
+    """A rod-like link between this body's origin and its child's origin."""
+    v = np.asarray(to_child, dtype=float)
+    length = max(float(np.linalg.norm(v)), 0.04)
+    half = (0.03, 0.03, length / 2) if abs(v[2]) >= max(abs(v[0]), abs(v[1])) else (length / 2, 0.03, 0.03)
+    body.add("inertial", pos=(v / 2).round(6).tolist(), mass=round(mass, 6),
+             diaginertia=np.round(_box_inertia(mass, half), 9).tolist())
+
+
+def _limits(design: LegDesign, role: str, side: str) -> tuple[float, float]:
+    lo, hi = design.limits[role]
+    # Roll and yaw limits mirror for the right leg (abduction stays positive outward).
+    if side == "right" and role in ("hip_roll", "hip_yaw", "ankle_roll"):
+        return (-hi, -lo)
+    return (lo, hi)
+
+
+def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool = True,
+                foot_frame_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[mjcf.RootElement, LegMap]:
+    """MJCF model and leg map for `design`.
+
+    `upper_body` adds a waist and two arm joints (held joints), `sole_sites=False`
+    gives the soles as poses relative to the foot body instead of sites, and
+    `foot_frame_rpy` rotates the foot body's frame away from the sole: both shape
+    the synthetic test robot that exercises what external robots need.
+    """
+    m = mjcf.RootElement(model=design.name)
+    m.compiler.angle = "radian"
+    m.option.timestep = 0.001
+    m.option.integrator = "implicitfast"
+    m.default.joint.armature = design.armature
+    m.default.joint.damping = design.joint_damping
+    m.default.geom.rgba = (0.7, 0.7, 0.75, 1)
+
+    pelvis = m.worldbody.add("body", name="pelvis", pos=(0, 0, 1.0))
+    pelvis.add("freejoint", name="root")
+    pelvis.add("inertial", pos=list(design.pelvis_com), mass=design.pelvis_mass,
+               diaginertia=np.round(_box_inertia(design.pelvis_mass, design.pelvis_box), 9).tolist())
+    pelvis.add("geom", name="trunk", type="box", size=list(design.pelvis_box), pos=list(design.pelvis_com),
+               contype=0, conaffinity=0, rgba=(0.35, 0.4, 0.5, 1))
+    pelvis.add("site", name="imu", pos=list(design.imu_pos), size=[0.01])
+    held: dict[str, float] = {}
+    if upper_body:
+        torso = pelvis.add("body", name="torso", pos=[0, 0, 0.25 * design.pelvis_box[2] * 4])
+        torso.add("joint", name="waist_yaw_joint", axis=[0, 0, 1], range=[-1, 1])
+        torso.add("inertial", pos=[0, 0, 0.1], mass=4.0, diaginertia=[0.05, 0.05, 0.03])
+        for side in SIDES:
+            arm = torso.add("body", name=f"{side}_arm", pos=_mirror((0, 0.2, 0.15), side))
+            arm.add("joint", name=f"{side}_shoulder_pitch_joint", axis=[0, 1, 0], range=[-3, 3])
+            arm.add("inertial", pos=[0, 0, -0.15], mass=2.0, diaginertia=[0.02, 0.02, 0.005])
+            fore = arm.add("body", name=f"{side}_forearm", pos=[0, 0, -0.28])
+            fore.add("joint", name=f"{side}_elbow_joint", axis=[0, 1, 0], range=[-2.5, 0.1])
+            fore.add("inertial", pos=[0, 0, -0.12], mass=1.2, diaginertia=[0.01, 0.01, 0.002])
+        held = {"waist_yaw_joint": 0.1, "left_shoulder_pitch_joint": 0.3, "right_shoulder_pitch_joint": 0.3,
+                "left_elbow_joint": -0.5, "right_elbow_joint": -0.5}
+
+    legs: dict[str, Leg] = {}
+    roles = list(design.hip_order) + ["knee", "ankle_pitch", "ankle_roll"]
+    assert sorted(roles) == sorted(LEG_ROLES)
+    # Origins of chain slots 1..6 in their parent, and the offset to each slot's child.
+    slot_pos = [design.hip_origin, *design.hip_slot_offsets, design.thigh, design.shin, design.ankle_gap]
+    for side in SIDES:
+        parent = pelvis
+        joints = []
+        for slot, role in enumerate(roles):
+            name = "foot" if role == "ankle_roll" else role
+            body = parent.add("body", name=f"{side}_{name}_link", pos=list(_mirror(slot_pos[slot], side)))
+            jname = f"{side}_{role}_joint"
+            body.add("joint", name=jname, axis=list(ROLE_AXIS[role]), range=list(_limits(design, role, side)))
+            joints.append(Joint(jname, role))
+            servo = design.servos[role]
+            m.actuator.add("position", name=f"{side}_{role}", joint=jname, kp=servo.kp, kv=servo.kv,
+                           forcelimited="true", forcerange=[-servo.torque_limit, servo.torque_limit])
+            if role != "ankle_roll":
+                child = _mirror(slot_pos[slot + 1], side)
+                _link_inertial(body, design.masses[slot], child)
+                if np.linalg.norm(child) > 0.05:
+                    body.add("geom", name=f"{side}_{name}_geom", type="capsule", fromto=[0, 0, 0, *child], size=[0.035],
+                             contype=0, conaffinity=0)
+            parent = body
+        foot = parent
+        sole_pos = np.asarray(_mirror(design.sole_offset, side))
+        hl, hw = design.sole_half
+        t = design.sole_thickness
+        foot.add("inertial", pos=(sole_pos + [0, 0, t]).round(6).tolist(), mass=design.masses[5],
+                 diaginertia=np.round(_box_inertia(design.masses[5], (hl, hw, t)), 9).tolist())
+        foot.add("geom", name=f"{side}_sole_geom", type="box", size=[hl, hw, t / 2],
+                 pos=(sole_pos + [0, 0, t / 2]).round(6).tolist(), rgba=(0.25, 0.25, 0.3, 1),
+                 friction=[1.0, 0.02, 0.001], condim=6)
+        ft = FrameSpec(site=f"{side}_ft")
+        foot.add("site", name=f"{side}_ft", pos=list(design.ft_pos), size=[0.01])
+        corners = {
+            "toe_left": (hl, hw, 0.0), "toe_right": (hl, -hw, 0.0),
+            "heel_left": (-hl, hw, 0.0), "heel_right": (-hl, -hw, 0.0),
+        }
+        if sole_sites:
+            foot.add("site", name=f"{side}_sole", pos=sole_pos.round(6).tolist(), size=[0.01])
+            for c in CORNER_NAMES:
+                foot.add("site", name=f"{side}_sole_{c}", pos=(sole_pos + corners[c]).round(6).tolist(), size=[0.005])
+            sole = FrameSpec(site=f"{side}_sole")
+        else:
+            sole = FrameSpec(body=foot.name, pos=tuple(sole_pos.round(6).tolist()))
+        if any(foot_frame_rpy):
+            # Rotate the foot body's frame; the sole frame stays where it was.
+            from scipy.spatial.transform import Rotation
+
+            rot = Rotation.from_euler("xyz", foot_frame_rpy)
+            foot.quat = np.roll(rot.as_quat(), 1).tolist()  # wxyz
+            inv = rot.inv()
+            for child in foot.all_children():
+                if child.tag == "joint":
+                    child.axis = inv.apply(child.axis).round(12).tolist()
+                elif child.tag in ("geom", "site", "inertial"):
+                    child.pos = inv.apply(child.pos).round(9).tolist()
+                    q = inv * Rotation.from_quat(np.roll(child.quat, -1)) if child.quat is not None else inv
+                    child.quat = np.roll(q.as_quat(), 1).round(12).tolist()
+            sole = FrameSpec(body=foot.name, pos=tuple(inv.apply(sole_pos).round(9).tolist()),
+                             rpy=tuple(inv.as_euler("xyz").tolist()))
+        legs[side] = Leg(tuple(joints), sole, corners, ft)
+
+    m.sensor.add("accelerometer", name="imu_acc", site="imu")
+    m.sensor.add("gyro", name="imu_gyro", site="imu")
+    for side in SIDES:
+        m.sensor.add("force", name=f"{side}_ft_force", site=f"{side}_ft")
+        m.sensor.add("torque", name=f"{side}_ft_torque", site=f"{side}_ft")
+
+    legmap = LegMap(
+        name=design.name,
+        mjcf=Path(f"{design.name}.xml"),
+        pelvis="pelvis",
+        legs=legs,
+        imu=FrameSpec(site="imu"),
+        knee_straight_rad=design.knee_straight_rad,
+        held_joints_rad=held,
+    )
+    return m, legmap
+
+
+def to_clean_xml(model: mjcf.RootElement) -> str:
+    """MJCF text without dm_control's scoping artefacts (`class="/"`), so that any
+    MJCF reader, dm_control's own included, loads it back."""
+    root = ET.fromstring(model.to_xml_string(precision=9))
+    outer = root.find("default")
+    inner = outer.find("default") if outer is not None else None
+    if inner is not None and inner.get("class") == "/":
+        outer.remove(inner)
+        outer.extend(list(inner))
+    for el in root.iter():
+        if el.get("class") == "/":
+            del el.attrib["class"]
+    ET.indent(root, space="  ")
+    return ET.tostring(root, encoding="unicode") + "\n"
+
+
+def write_robot(design: LegDesign, out_dir: Path, **kwargs) -> Path:
+    """Write `<name>.xml` and `<name>.legmap.yaml` into `out_dir`; returns the leg map path."""
+    model, legmap = build_model(design, **kwargs)
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    xml_path = out_dir / f"{design.name}.xml"
+    atomic_write_text(xml_path, to_clean_xml(model))
+    lm_path = out_dir / f"{design.name}.legmap.yaml"
+    d = legmap.to_dict()
+    d["mjcf"] = xml_path.name
+    header = f"# Generated by legcal_bench.robots.build from design '{design.name}'; do not edit.\n"
+    atomic_write_text(lm_path, header + yaml.safe_dump(d, sort_keys=False))
+    return lm_path
+
+
+def main() -> None:
+    for design in DESIGNS.values():
+        print(write_robot(design, ASSETS))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,142 @@
+"""One geometry description for the built-in humanoid legs.
+
+A `LegDesign` says everything about a robot's lower body: link offsets, masses,
+joint limits, servos and feet. `build.py` turns it into MJCF; the MJCF is then the
+single source of truth that both MuJoCo and Pinocchio load. The built-in robots are
+small edits of one base design (`dataclasses.replace`), so the matched pair differs
+in exactly one field: the proximal hip ordering.
+
+Conventions (left leg; the right leg mirrors every y coordinate and the roll/yaw
+limits): x forward, y left, z up; hip pitch, knee and ankle pitch rotate about +y,
+so a squat has hip pitch < 0, knee > 0, ankle pitch < 0.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+HIP_ROLES = ("hip_pitch", "hip_roll", "hip_yaw")
+LEG_ROLES = HIP_ROLES + ("knee", "ankle_pitch", "ankle_roll")
+ROLE_AXIS = {
+    "hip_pitch": (0.0, 1.0, 0.0),
+    "hip_roll": (1.0, 0.0, 0.0),
+    "hip_yaw": (0.0, 0.0, 1.0),
+    "knee": (0.0, 1.0, 0.0),
+    "ankle_pitch": (0.0, 1.0, 0.0),
+    "ankle_roll": (1.0, 0.0, 0.0),
+}
+
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Servo:
+    """A position servo: stiffness (N m/rad), damping (N m s/rad), torque limit (N m)."""
+
+    kp: float
+    kv: float
+    torque_limit: float
+
+
+@dataclass(frozen=True)
+class LegDesign:
+    name: str
+    # The three proximal hip joints, from pelvis outwards: A3-like is
+    # (hip_pitch, hip_roll, hip_yaw), A2-like is (hip_roll, hip_yaw, hip_pitch).
+    hip_order: tuple[str, str, str]
+    # Pelvis (with the lumped trunk; these robots have no upper-body joints).
+    pelvis_mass: float = 28.0
+    pelvis_com: Vec3 = (0.0, 0.0, 0.16)
+    pelvis_box: Vec3 = (0.11, 0.14, 0.22)  # half sizes of the trunk block
+    # Where each chain element sits in its parent, left leg. The hip offsets are
+    # listed per chain slot, not per role: swapping hip_order keeps the geometry.
+    hip_origin: Vec3 = (0.0, 0.095, -0.06)
+    hip_slot_offsets: tuple[Vec3, Vec3] = ((0.0, 0.045, -0.025), (0.0, 0.0, -0.075))
+    # Thigh: last hip joint to knee; shin: knee to ankle pitch. The millimetre-scale
+    # lateral components are the wiring/structure offsets real legs have.
+    thigh: Vec3 = (0.002, 0.004, -0.36)
+    shin: Vec3 = (-0.001, -0.003, -0.36)
+    ankle_gap: Vec3 = (0.0, 0.0, -0.012)  # ankle pitch to ankle roll axis
+    sole_offset: Vec3 = (0.035, 0.001, -0.058)  # ankle roll axis to sole centre
+    sole_half: tuple[float, float] = (0.115, 0.05)  # sole half length, half width
+    sole_thickness: float = 0.02
+    # Masses (kg) per chain slot: hip slot 1, hip slot 2, thigh, shin, ankle link, foot.
+    masses: tuple[float, ...] = (1.6, 1.6, 4.6, 3.0, 0.35, 1.1)
+    # Joint limits (rad) per role, left leg.
+    limits: dict[str, tuple[float, float]] = field(
+        default_factory=lambda: {
+            "hip_pitch": (-2.4, 1.6),
+            "hip_roll": (-0.45, 0.7),
+            "hip_yaw": (-1.0, 1.0),
+            "knee": (-0.08, 2.6),
+            "ankle_pitch": (-0.9, 0.55),
+            "ankle_roll": (-0.35, 0.35),
+        }
+    )
+    # Joint-level position servos as stiff as a full-size humanoid's drives in position
+    # mode, with torque limits of its actuators.
+    servos: dict[str, Servo] = field(
+        default_factory=lambda: {
+            "hip_pitch": Servo(1500.0, 30.0, 150.0),
+            "hip_roll": Servo(1500.0, 30.0, 150.0),
+            "hip_yaw": Servo(800.0, 16.0, 90.0),
+            "knee": Servo(2000.0, 40.0, 250.0),
+            "ankle_pitch": Servo(800.0, 16.0, 100.0),
+            "ankle_roll": Servo(500.0, 10.0, 60.0),
+        }
+    )
+    armature: float = 0.03
+    joint_damping: float = 0.2
+    knee_straight_rad: float = 0.0
+    imu_pos: Vec3 = (-0.02, 0.0, 0.08)  # pelvis IMU, in the pelvis frame
+    ft_pos: Vec3 = (0.0, 0.0, -0.03)  # ankle F/T sensor site, in the foot body
+
+    def scaled(self, name: str, length: float, mass: float) -> "LegDesign":
+        """The same design with every length times `length` and mass times `mass`."""
+
+        def s(v: Vec3) -> Vec3:
+            return tuple(length * x for x in v)  # type: ignore[return-value]
+
+        return replace(
+            self,
+            name=name,
+            pelvis_mass=self.pelvis_mass * mass,
+            pelvis_com=s(self.pelvis_com),
+            pelvis_box=s(self.pelvis_box),
+            hip_origin=s(self.hip_origin),
+            hip_slot_offsets=(s(self.hip_slot_offsets[0]), s(self.hip_slot_offsets[1])),
+            thigh=s(self.thigh),
+            shin=s(self.shin),
+            ankle_gap=s(self.ankle_gap),
+            sole_offset=s(self.sole_offset),
+            sole_half=(self.sole_half[0] * length, self.sole_half[1] * length),
+            masses=tuple(m * mass for m in self.masses),
+            servos={
+                r: Servo(v.kp * mass * length, v.kv * mass * length, v.torque_limit * mass * length)
+                for r, v in self.servos.items()
+            },
+            imu_pos=s(self.imu_pos),
+            ft_pos=s(self.ft_pos),
+        )
+
+
+P_R_Y = ("hip_pitch", "hip_roll", "hip_yaw")
+R_Y_P = ("hip_roll", "hip_yaw", "hip_pitch")
+
+BASE = LegDesign(name="base", hip_order=P_R_Y)
+
+# A3-like: pitch->roll->yaw, a 1.6 m class humanoid (~52 kg).
+A3 = replace(BASE, name="a3", hip_order=P_R_Y)
+# A2-like: roll->yaw->pitch, a larger 1.7 m class humanoid (~66 kg) with its own
+# proportions (longer thigh, wider hips).
+A2 = replace(
+    BASE.scaled("a2", length=1.08, mass=1.25),
+    hip_order=R_Y_P,
+    thigh=(0.001, 0.005, -0.40),
+    hip_origin=(0.0, 0.105, -0.065),
+)
+# The controlled comparison: identical in every field but the hip ordering.
+PAIR_RYP = replace(BASE, name="pair_ryp", hip_order=R_Y_P)
+PAIR_PRY = replace(BASE, name="pair_pry", hip_order=P_R_Y)
+
+DESIGNS: dict[str, LegDesign] = {d.name: d for d in (A2, A3, PAIR_RYP, PAIR_PRY)}

@@ -1,0 +1,252 @@
+"""The leg map: what legcal-bench needs to know about any robot beyond its MJCF.
+
+A small YAML file names the 12 leg joints (left leg then right, each from pelvis to
+foot) with their roles, the sole frames and their four corner points, the pelvis and
+the IMU placement, the angles at which any other joint is held, and servo gains when
+the MJCF drives torque motors. See docs/leg-map.md for the schema.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
+
+SCHEMA = "legcal-legmap/1"
+SIDES = ("left", "right")
+CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
+
+
+class LegMapError(ValueError):
+    """A leg map that cannot be used; the message names the field and the fix."""
+
+
+@dataclass(frozen=True)
+class FrameSpec:
+    """A frame on the robot: an MJCF site, or a pose relative to a body.
+
+    `rpy` is roll-pitch-yaw in radians (fixed axes x, then y, then z).
+    """
+
+    site: str | None = None
+    body: str | None = None
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    def to_dict(self) -> dict:
+        if self.site is not None:
+            return {"site": self.site}
+        d: dict = {"body": self.body, "pos": list(self.pos)}
+        if any(self.rpy):
+            d["rpy"] = list(self.rpy)
+        return d
+
+
+@dataclass(frozen=True)
+class Joint:
+    name: str
+    role: str
+
+
+@dataclass(frozen=True)
+class Leg:
+    joints: tuple[Joint, ...]
+    sole: FrameSpec
+    corners: dict[str, tuple[float, float, float]]  # in the sole frame
+    ft: FrameSpec | None = None
+
+    @property
+    def hip_order(self) -> tuple[str, str, str]:
+        return tuple(j.role for j in self.joints[:3])  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class LegMap:
+    name: str
+    mjcf: Path
+    pelvis: str
+    legs: dict[str, Leg]
+    imu: FrameSpec
+    knee_straight_rad: float = 0.0
+    held_joints_rad: dict[str, float] = field(default_factory=dict)
+    # Only for MJCFs whose leg actuators are torque motors: joint -> (kp, kd).
+    servo_gains: dict[str, tuple[float, float]] = field(default_factory=dict)
+    source: Path | None = None
+
+    @property
+    def joint_names(self) -> list[str]:
+        return [j.name for side in SIDES for j in self.legs[side].joints]
+
+    @property
+    def joint_roles(self) -> list[str]:
+        return [j.role for side in SIDES for j in self.legs[side].joints]
+
+    @property
+    def hip_order(self) -> tuple[str, str, str]:
+        return self.legs["left"].hip_order
+
+    def to_dict(self, mjcf_relative_to: Path | None = None) -> dict:
+        mjcf = self.mjcf
+        if mjcf_relative_to is not None:
+            mjcf = Path(_relpath(self.mjcf, mjcf_relative_to))
+        d: dict = {
+            "schema": SCHEMA,
+            "name": self.name,
+            "mjcf": str(mjcf),
+            "pelvis": self.pelvis,
+            "imu": self.imu.to_dict(),
+            "knee_straight_rad": self.knee_straight_rad,
+            "legs": {},
+        }
+        for side in SIDES:
+            leg = self.legs[side]
+            ld: dict = {
+                "joints": [{"name": j.name, "role": j.role} for j in leg.joints],
+                "sole": leg.sole.to_dict(),
+                "corners": {k: list(v) for k, v in leg.corners.items()},
+            }
+            if leg.ft is not None:
+                ld["ft"] = leg.ft.to_dict()
+            d["legs"][side] = ld
+        if self.held_joints_rad:
+            d["held_joints_rad"] = dict(self.held_joints_rad)
+        if self.servo_gains:
+            d["servo_gains"] = {k: list(v) for k, v in self.servo_gains.items()}
+        return d
+
+
+def _relpath(target: Path, start: Path) -> str:
+    import os
+
+    return os.path.relpath(Path(target).resolve(), Path(start).resolve())
+
+
+def _vec(value, where: str, n: int = 3) -> tuple[float, ...]:
+    try:
+        arr = np.asarray(value, dtype=float).reshape(-1)
+    except (TypeError, ValueError):
+        raise LegMapError(f"{where}: expected {n} numbers, got {value!r}") from None
+    if arr.size != n or not np.all(np.isfinite(arr)):
+        raise LegMapError(f"{where}: expected {n} finite numbers, got {value!r}")
+    return tuple(float(x) for x in arr)
+
+
+def _frame(d, where: str) -> FrameSpec:
+    if not isinstance(d, dict):
+        raise LegMapError(f"{where}: expected a mapping with 'site' or 'body' (+ 'pos', 'rpy'), got {d!r}")
+    unknown = set(d) - {"site", "body", "pos", "rpy"}
+    if unknown:
+        raise LegMapError(f"{where}: unknown keys {sorted(unknown)}; allowed: site, body, pos, rpy")
+    if ("site" in d) == ("body" in d):
+        raise LegMapError(f"{where}: give exactly one of 'site: NAME' or 'body: NAME' (with optional pos/rpy)")
+    if "site" in d:
+        if "pos" in d or "rpy" in d:
+            raise LegMapError(f"{where}: 'pos'/'rpy' go with 'body', not with 'site'")
+        return FrameSpec(site=str(d["site"]))
+    return FrameSpec(
+        body=str(d["body"]),
+        pos=_vec(d.get("pos", (0, 0, 0)), f"{where}.pos"),
+        rpy=_vec(d.get("rpy", (0, 0, 0)), f"{where}.rpy (radians)"),
+    )
+
+
+def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegMap:
+    """Validate a leg-map mapping; relative paths resolve against `base_dir`."""
+    where = str(source) if source else "leg map"
+    if not isinstance(data, dict):
+        raise LegMapError(f"{where}: expected a YAML mapping at the top level")
+    if data.get("schema") != SCHEMA:
+        raise LegMapError(f"{where}: field 'schema' must be '{SCHEMA}' (got {data.get('schema')!r})")
+    for key in ("name", "mjcf", "pelvis", "imu", "legs"):
+        if key not in data:
+            raise LegMapError(f"{where}: missing field '{key}' (see docs/leg-map.md)")
+    unknown = set(data) - {
+        "schema", "name", "mjcf", "pelvis", "imu", "legs", "knee_straight_rad",
+        "held_joints_rad", "servo_gains",
+    }
+    if unknown:
+        raise LegMapError(f"{where}: unknown fields {sorted(unknown)} (see docs/leg-map.md)")
+    mjcf = Path(data["mjcf"])
+    if not mjcf.is_absolute():
+        mjcf = (base_dir / mjcf).resolve()
+    if not mjcf.is_file():
+        raise LegMapError(f"{where}: field 'mjcf' points to {mjcf}, which does not exist; "
+                          "give a path relative to the leg map or an absolute path")
+    legs_d = data["legs"]
+    if not isinstance(legs_d, dict) or set(legs_d) != set(SIDES):
+        raise LegMapError(f"{where}: field 'legs' must have exactly the keys 'left' and 'right'")
+    legs = {}
+    for side in SIDES:
+        ld = legs_d[side]
+        lw = f"{where}: legs.{side}"
+        for key in ("joints", "sole", "corners"):
+            if key not in ld:
+                raise LegMapError(f"{lw}: missing field '{key}'")
+        joints_d = ld["joints"]
+        if not isinstance(joints_d, list) or len(joints_d) != 6:
+            raise LegMapError(f"{lw}.joints: list the leg's 6 joints from pelvis to foot, "
+                              f"each as {{name: ..., role: ...}}")
+        joints = []
+        for i, jd in enumerate(joints_d):
+            if not isinstance(jd, dict) or "name" not in jd or "role" not in jd:
+                raise LegMapError(f"{lw}.joints[{i}]: expected {{name: ..., role: ...}}, got {jd!r}")
+            if jd["role"] not in LEG_ROLES:
+                raise LegMapError(f"{lw}.joints[{i}].role: {jd['role']!r} is not one of {list(LEG_ROLES)}")
+            joints.append(Joint(str(jd["name"]), str(jd["role"])))
+        roles = [j.role for j in joints]
+        if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != ["knee", "ankle_pitch", "ankle_roll"]:
+            raise LegMapError(
+                f"{lw}.joints: roles must be the three hip joints (any order), then knee, "
+                f"ankle_pitch, ankle_roll, from pelvis to foot; got {roles}")
+        corners_d = ld["corners"]
+        if not isinstance(corners_d, dict) or set(corners_d) != set(CORNER_NAMES):
+            raise LegMapError(f"{lw}.corners: give the four sole corners {list(CORNER_NAMES)} "
+                              "as [x, y, z] in the sole frame")
+        corners = {k: _vec(corners_d[k], f"{lw}.corners.{k}") for k in CORNER_NAMES}
+        ft = _frame(ld["ft"], f"{lw}.ft") if "ft" in ld else None
+        legs[side] = Leg(tuple(joints), _frame(ld["sole"], f"{lw}.sole"), corners, ft)
+    if legs["left"].hip_order != legs["right"].hip_order:
+        raise LegMapError(f"{where}: left and right legs have different hip orderings "
+                          f"{legs['left'].hip_order} vs {legs['right'].hip_order}")
+    names = [j.name for s in SIDES for j in legs[s].joints]
+    if len(set(names)) != 12:
+        raise LegMapError(f"{where}: the 12 leg joint names must be distinct; got {names}")
+    held = data.get("held_joints_rad", {}) or {}
+    if not isinstance(held, dict):
+        raise LegMapError(f"{where}: field 'held_joints_rad' must map joint names to angles in radians")
+    for k, v in held.items():
+        if k in names:
+            raise LegMapError(f"{where}: held_joints_rad.{k} is a leg joint; only non-leg joints are held")
+        _vec([v], f"{where}: held_joints_rad.{k}", 1)
+    gains = data.get("servo_gains", {}) or {}
+    if not isinstance(gains, dict):
+        raise LegMapError(f"{where}: field 'servo_gains' must map leg joint names to [kp, kd]")
+    for k in gains:
+        if k not in names:
+            raise LegMapError(f"{where}: servo_gains.{k} is not one of the 12 leg joints")
+    return LegMap(
+        name=str(data["name"]),
+        mjcf=mjcf,
+        pelvis=str(data["pelvis"]),
+        legs=legs,
+        imu=_frame(data["imu"], f"{where}: imu"),
+        knee_straight_rad=float(_vec([data.get("knee_straight_rad", 0.0)], f"{where}: knee_straight_rad", 1)[0]),
+        held_joints_rad={k: float(v) for k, v in held.items()},
+        servo_gains={k: _vec(v, f"{where}: servo_gains.{k} ([kp, kd])", 2) for k, v in gains.items()},
+        source=source,
+    )
+
+
+def load_legmap(path: str | Path) -> LegMap:
+    path = Path(path).resolve()
+    if not path.is_file():
+        raise LegMapError(f"leg map {path} does not exist")
+    try:
+        data = yaml.safe_load(path.read_text())
+    except yaml.YAMLError as e:
+        raise LegMapError(f"{path}: not valid YAML: {e}") from None
+    return parse_legmap(data, path.parent, source=path)

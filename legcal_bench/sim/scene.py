@@ -1,0 +1,221 @@
+"""Compose a MuJoCo scene around any robot MJCF (dm_control's mjcf), per floor mode.
+
+The robot file is loaded as it is; the scene only adds: a floor, the leg map's frames
+as sites (sole, corners, IMU, F/T) where the MJCF does not have them, our own IMU and
+F/T sensors on those sites, joint equalities that hold non-leg joints, and in weld
+mode a mocap anchor per foot with a stiff weld to the sole site. Kinematics are
+untouched, so Pinocchio (which loads the plain robot file) sees the same robot.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import mujoco
+import numpy as np
+from dm_control import mjcf
+from scipy.spatial.transform import Rotation
+
+from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap, LegMapError
+
+MODES = ("kinematic", "weld", "contact")
+# Servo-held feet: MuJoCo's default weld lets them drift by centimetres.
+WELD_SOLREF = (0.004, 1.0)
+WELD_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
+# Weight of the weld's angular residual (a length): at 1 the soles still tilt by
+# hundredths of a degree under the closed-chain strain; servo-held feet do not.
+WELD_TORQUESCALE = 10.0
+FLOOR_FRICTION = (1.2, 0.02, 0.002)
+FLOOR_SOLREF = (0.004, 1.0)
+FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+
+@dataclass
+class Scene:
+    model: mujoco.MjModel
+    legmap: LegMap
+    mode: str
+    qpos_adr: np.ndarray  # (12,) leg joints
+    dof_adr: np.ndarray  # (12,)
+    free_qpos_adr: int  # pelvis free joint (position 3 + quaternion wxyz 4)
+    free_dof_adr: int
+    pelvis_body: int
+    sole_site: dict[str, int]
+    corner_sites: dict[str, list[int]]
+    imu_site: int
+    mocap: dict[str, int]  # mocap index per side (weld mode)
+    sensor_adr: dict[str, int]  # name -> address in sensordata
+    has_ft: bool
+    # Per leg joint: position-actuator id (or -1), motor actuator id (or -1), gear.
+    position_act: np.ndarray
+    motor_act: np.ndarray
+    motor_gear: np.ndarray
+    servo_kp: np.ndarray
+    servo_kd: np.ndarray
+
+
+def _find(model: mjcf.RootElement, kind: str, name: str, where: str):
+    el = model.find(kind, name)
+    if el is None:
+        raise LegMapError(f"{where}: no {kind} named '{name}' in the MJCF")
+    return el
+
+
+def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, extra=None):
+    """Site for a leg-map frame (optionally at `extra` = (pos) in that frame)."""
+    if spec.site is not None:
+        site = _find(model, "site", spec.site, where)
+        body, pos, rot = site.parent, np.asarray(site.pos if site.pos is not None else np.zeros(3), float), (
+            Rotation.from_quat(np.roll(site.quat, -1)) if site.quat is not None else Rotation.identity())
+        if extra is None:
+            return site.name
+    else:
+        body = _find(model, "body", spec.body, where)
+        pos, rot = np.asarray(spec.pos, float), Rotation.from_euler("xyz", spec.rpy)
+    if extra is not None:
+        pos = pos + rot.apply(extra)
+    body.add("site", name=name, pos=pos.tolist(), quat=np.roll(rot.as_quat(), 1).tolist(), size=[0.006],
+             rgba=[0.9, 0.3, 0.2, 1], group=3)
+    return name
+
+
+def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
+    if mode not in MODES:
+        raise ValueError(f"mode {mode!r}: use one of {MODES}")
+    where = str(legmap.source or legmap.name)
+    m = mjcf.from_path(str(legmap.mjcf))
+    m.option.timestep = physics_dt
+    m.option.integrator = "implicitfast"
+    m.option.gravity = (0, 0, -9.81)
+    vis_global = getattr(m.visual, "global")
+    vis_global.offwidth, vis_global.offheight = 1280, 960
+    pelvis = _find(m, "body", legmap.pelvis, f"{where}: pelvis")
+    if pelvis.parent is not m.worldbody:
+        raise LegMapError(f"{where}: pelvis body '{legmap.pelvis}' must be a child of <worldbody>")
+    free = pelvis.freejoint or next((j for j in pelvis.joint if j.type == "free"), None)
+    if free is None:
+        free = pelvis.add("freejoint", name="legcal_root")
+    m.worldbody.add("light", pos=[0, -1, 3], dir=[0, 0.3, -1], directional=True, diffuse=[0.7, 0.7, 0.7])
+    tex = m.asset.add("texture", name="legcal_grid", type="2d", builtin="checker", width=256, height=256,
+                      rgb1=[0.82, 0.84, 0.86], rgb2=[0.72, 0.74, 0.78])
+    mat = m.asset.add("material", name="legcal_floor", texture=tex, texrepeat=[8, 8], texuniform=True)
+    collide = 1 if mode == "contact" else 0
+    m.worldbody.add("geom", name="legcal_floor", type="plane", size=[5, 5, 0.1], material=mat,
+                    contype=collide, conaffinity=collide, friction=list(FLOOR_FRICTION), condim=6,
+                    solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
+    if mode == "contact":
+        # Soft friction lets loaded soles creep by millimetres; an elliptic cone with a
+        # high impedance ratio and a no-slip pass make static friction behave as static.
+        m.option.cone = "elliptic"
+        m.option.impratio = 10
+        m.option.noslip_iterations = 5
+    else:
+        # Only the floor's contacts matter here: in kinematic and weld modes, none at all.
+        m.option.flag.contact = "disable"
+
+    sole_site, corner_sites = {}, {}
+    for side in SIDES:
+        leg = legmap.legs[side]
+        sole_site[side] = _add_site(m, f"legcal_{side}_sole", leg.sole, f"{where}: legs.{side}.sole")
+        corner_sites[side] = [
+            _add_site(m, f"legcal_{side}_corner_{c}", leg.sole, f"{where}: legs.{side}.sole", leg.corners[c])
+            for c in CORNER_NAMES
+        ]
+    imu_site = _add_site(m, "legcal_imu", legmap.imu, f"{where}: imu")
+    m.sensor.add("accelerometer", name="legcal_imu_acc", site=imu_site)
+    m.sensor.add("gyro", name="legcal_imu_gyro", site=imu_site)
+    has_ft = all(legmap.legs[s].ft is not None for s in SIDES)
+    if has_ft:
+        for side in SIDES:
+            ft = _add_site(m, f"legcal_{side}_ft", legmap.legs[side].ft, f"{where}: legs.{side}.ft")
+            m.sensor.add("force", name=f"legcal_{side}_force", site=ft)
+            m.sensor.add("torque", name=f"legcal_{side}_torque", site=ft)
+    for name, angle in legmap.held_joints_rad.items():
+        _find(m, "joint", name, f"{where}: held_joints_rad")
+        m.equality.add("joint", name=f"legcal_hold_{name}", joint1=name, polycoef=[angle, 0, 0, 0, 0],
+                       solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
+    if mode == "weld":
+        for side in SIDES:
+            anchor = m.worldbody.add("body", name=f"legcal_{side}_anchor", mocap=True)
+            anchor.add("site", name=f"legcal_{side}_anchor_site", size=[0.004], group=3)
+            m.equality.add("weld", name=f"legcal_{side}_weld", site1=sole_site[side], torquescale=WELD_TORQUESCALE,
+                           site2=f"legcal_{side}_anchor_site", solref=list(WELD_SOLREF), solimp=list(WELD_SOLIMP))
+
+    model = mujoco.MjModel.from_xml_string(m.to_xml_string(), m.get_assets())
+    return _index(model, legmap, mode, free.full_identifier, sole_site, corner_sites, imu_site, has_ft, where)
+
+
+def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, has_ft, where) -> Scene:
+    def jid(name):
+        i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if i < 0:
+            raise LegMapError(f"{where}: joint '{name}' is not in the MJCF")
+        return i
+
+    def sid(name):
+        return mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, name)
+
+    joints = [jid(n) for n in legmap.joint_names]
+    free = jid(free_name)
+    sensor_adr = {}
+    for i in range(model.nsensor):
+        name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SENSOR, i)
+        if name and name.startswith("legcal_"):
+            sensor_adr[name[len("legcal_"):]] = int(model.sensor_adr[i])
+    position_act = -np.ones(12, dtype=int)
+    motor_act = -np.ones(12, dtype=int)
+    gear = np.ones(12)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] not in joints:
+            continue
+        k = joints.index(int(model.actuator_trnid[a, 0]))
+        g, b = model.actuator_gainprm[a], model.actuator_biasprm[a]
+        is_position = g[0] > 0 and np.isclose(b[1], -g[0]) and model.actuator_gaintype[a] == 0
+        is_motor = np.isclose(g[0], 1.0) and not np.any(b[:3]) and model.actuator_biastype[a] == 0
+        if is_position:
+            position_act[k] = a
+        elif is_motor:
+            motor_act[k], gear[k] = a, float(model.actuator_gear[a, 0])
+    kp, kd = np.zeros(12), np.zeros(12)
+    for k, name in enumerate(legmap.joint_names):
+        if position_act[k] >= 0:
+            continue
+        if name not in legmap.servo_gains:
+            raise LegMapError(
+                f"{where}: leg joint '{name}' has no position actuator in the MJCF; "
+                f"give its PD gains as servo_gains.{name}: [kp, kd] in the leg map")
+        if motor_act[k] < 0:
+            raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF")
+        kp[k], kd[k] = legmap.servo_gains[name]
+    mocap = {}
+    if mode == "weld":
+        for side in SIDES:
+            b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, f"legcal_{side}_anchor")
+            mocap[side] = int(model.body_mocapid[b])
+    return Scene(
+        model=model, legmap=legmap, mode=mode,
+        qpos_adr=np.array([model.jnt_qposadr[j] for j in joints]),
+        dof_adr=np.array([model.jnt_dofadr[j] for j in joints]),
+        free_qpos_adr=int(model.jnt_qposadr[free]), free_dof_adr=int(model.jnt_dofadr[free]),
+        pelvis_body=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, legmap.pelvis),
+        sole_site={s: sid(n) for s, n in sole_site.items()},
+        corner_sites={s: [sid(n) for n in names] for s, names in corner_sites.items()},
+        imu_site=sid(imu_site), mocap=mocap, sensor_adr=sensor_adr, has_ft=has_ft,
+        position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
+    )
+
+
+def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
+    """Drive the leg joints toward `target` (joint space): position actuators take the
+    target as ctrl; torque motors get the leg map's PD law."""
+    pa = scene.position_act >= 0
+    data.ctrl[scene.position_act[pa]] = target[pa]
+    ma = scene.motor_act >= 0
+    if ma.any():
+        q = data.qpos[scene.qpos_adr[ma]]
+        qd = data.qvel[scene.dof_adr[ma]]
+        tau = scene.servo_kp[ma] * (target[ma] - q) - scene.servo_kd[ma] * qd
+        data.ctrl[scene.motor_act[ma]] = tau / scene.motor_gear[ma]
