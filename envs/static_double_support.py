@@ -8,7 +8,8 @@ says so. Each step is one logged frame at `rate_hz`.
 
 Physics modes:
   kinematic  exact closed-chain postures from IK on the simulated robot; encoders are
-             derived from them. No dynamics: the ideal floor.
+             derived from them. No dynamics: the ideal floor (each frame is a static
+             posture, so the accelerometer reads gravity alone).
   weld       MuJoCo, each sole welded (stiffly) to its placement.
   contact    MuJoCo, frictional flat floor, no welds; the robot settles on its soles.
 In weld and contact modes the servos track encoder-space targets from the nominal IK.
@@ -66,7 +67,7 @@ class StaticDoubleSupportEnv(gym.Env):
         physics_dt: float = 0.001,
         offset_seed: int = 0,
         knee_straight_error_rad: float = 0.005,
-        settle_s: float = 1.0,
+        settle_s: float = 3.0,
         render_mode: str | None = None,
     ):
         if mode not in MODES:
@@ -211,9 +212,13 @@ class StaticDoubleSupportEnv(gym.Env):
                 pq = se3_to_pos_quat(T)
                 d.mocap_pos[sc.mocap[side]], d.mocap_quat[sc.mocap[side]] = pq[:3], pq[3:]
         mujoco.mj_forward(sc.model, d)
+        # The servos start at the true posture and blend to their (strained) targets
+        # over most of the settle time: a step would jolt the robot off its feet.
         self._target = self._servo_target()
-        for _ in range(int(round(self.settle_s / self.physics_dt))):
-            apply_servos(sc, d, self._target)
+        n = int(round(self.settle_s / self.physics_dt))
+        for i in range(n):
+            s = min(1.0, (i + 1) / max(1, int(0.7 * n)))
+            apply_servos(sc, d, q_true + (s * s * (3 - 2 * s)) * (self._target - q_true))
             mujoco.mj_step(sc.model, d)
 
     def _advance_physics(self) -> None:
@@ -233,11 +238,11 @@ class StaticDoubleSupportEnv(gym.Env):
         if self.mode != "kinematic":
             sd, adr = self.data.sensordata, self._scene.sensor_adr
             return sd[adr["imu_acc"]:adr["imu_acc"] + 3].copy(), sd[adr["imu_gyro"]:adr["imu_gyro"] + 3].copy()
-        # Kinematic mode: backward differences of the IMU pose over the last frames.
-        T0, T1, T2 = self._imu_hist
-        acc_w = (T2.translation - 2 * T1.translation + T0.translation) / self.dt**2
+        # Kinematic mode: each frame is a static posture (quasi-static), so the
+        # accelerometer reads gravity alone; the rate is the backward difference.
+        _, T1, T2 = self._imu_hist
         gyro = pin.log3(T1.rotation.T @ T2.rotation) / self.dt
-        return T2.rotation.T @ (acc_w - GRAVITY), gyro
+        return T2.rotation.T @ (-GRAVITY), gyro
 
     def _observe(self) -> dict:
         acc, gyro = self._true_imu()

@@ -16,7 +16,7 @@ from tqdm import tqdm
 
 from legcal_bench.envs.static_double_support import StaticDoubleSupportEnv
 from legcal_bench.recording import Recording, Truth, truth_path, write_manifest
-from legcal_bench.stances import STANCES, reachable_trajectory
+from legcal_bench.stances import STANCES, feasible_trajectory
 
 
 @dataclass
@@ -85,7 +85,7 @@ def record_segment(env: StaticDoubleSupportEnv, kind: str, stance: str, duration
     if stance == "standing":
         traj = np.repeat(info["posture"][None], n, axis=0)
     else:
-        traj = reachable_trajectory(env.nominal, env._placement, duration, env.rate_hz,
+        traj = feasible_trajectory(env.nominal, env._placement, duration, env.rate_hz,
                                     np.random.default_rng(seed + 7919))
     obs_l, info_l = [], []
     for posture in traj:
@@ -163,5 +163,7 @@ def format_summary(s: CollectSummary) -> str:
             f"{g.name:<12} {g.kind:<9} {g.stance:<9} {g.frames:>6} {g.max_gyro:>8.3f}/s "
             f"{g.max_sole_drift_mm:>8.4f} mm {g.max_sole_drift_deg:>6.4f}° "
             f"{min(g.joint_range_deg):>15.2f} .. {max(g.joint_range_deg):.2f}"
-            + (f"  ({g.unreachable} unreachable postures held)" if g.unreachable else ""))
+            + (f"  ({g.unreachable} unreachable postures held)" if g.unreachable else "")
+            + ("  WARNING: a sole moved more than 5 mm (slip or fall): not static contact"
+               if g.max_sole_drift_mm > 5.0 else ""))
     return "\n".join(lines)

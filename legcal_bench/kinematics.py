@@ -130,6 +130,36 @@ class LegKinematics:
         self._fk(q)
         return self._rel(self.imu_frame)
 
+    def com(self, q: np.ndarray) -> np.ndarray:
+        """Centre of mass of the whole robot in the pelvis frame."""
+        c = pin.centerOfMass(self.model, self.data, self.q_full(q))  # also runs forward kinematics
+        pin.updateFramePlacements(self.model, self.data)
+        return self.data.oMf[self.pelvis_frame].actInv(c)
+
+    def joint_axes(self, q: np.ndarray | None = None) -> np.ndarray:
+        """(12, 3) leg joint axes in the pelvis frame (at q, default all zeros)."""
+        qf = self.q_full(np.zeros(12) if q is None else q)
+        pin.computeJointJacobians(self.model, self.data, qf)
+        pin.updateFramePlacements(self.model, self.data)
+        R_B = self.data.oMf[self.pelvis_frame].rotation
+        axes = np.empty((12, 3))
+        for i, name in enumerate(self.legmap.joint_names):
+            J = pin.getJointJacobian(self.model, self.data, self.model.getJointId(name), pin.WORLD)
+            axes[i] = R_B.T @ J[3:, self.leg_v_idx[i]]
+        return axes
+
+    def pitch_signs(self) -> np.ndarray:
+        """(12,) +-1 for hip pitch, knee and ankle pitch: each axis's direction relative to
+        its leg's common pitch axis (the knee's); 0 for the other joints."""
+        axes, roles = self.joint_axes(), self.legmap.joint_roles
+        signs = np.zeros(12)
+        for leg in (range(6), range(6, 12)):
+            knee = next(i for i in leg if roles[i] == "knee")
+            for i in leg:
+                if roles[i] in ("hip_pitch", "knee", "ankle_pitch"):
+                    signs[i] = np.sign(axes[i] @ axes[knee])
+        return signs
+
     def sole_jacobian(self, side: str, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian of the sole pose in its own (local) frame w.r.t. that leg's joints."""
         qf = self.q_full(q)

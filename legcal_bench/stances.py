@@ -40,10 +40,12 @@ STANCES: dict[str, Stance] = {
     s.name: s
     for s in (
         Stance("I", "normal squat"),
-        Stance("II", "left lunge", left_x=0.15, right_x=-0.12, depth=0.10,
-               amplitude=(0.015, 0.02, 0.025, 0.04, 0.06, 0.08)),
-        Stance("III", "right lunge", left_x=-0.12, right_x=0.15, depth=0.10,
-               amplitude=(0.015, 0.02, 0.025, 0.04, 0.06, 0.08)),
+        # Lunges sway less sideways: their support polygon is a skewed parallelogram,
+        # and a strained chain (offsets) rolls narrow feet onto their edges.
+        Stance("II", "left lunge", left_x=0.12, right_x=-0.10, depth=0.10,
+               amplitude=(0.015, 0.012, 0.025, 0.025, 0.06, 0.06)),
+        Stance("III", "right lunge", left_x=-0.10, right_x=0.12, depth=0.10,
+               amplitude=(0.015, 0.012, 0.025, 0.025, 0.06, 0.06)),
         Stance("IV", "wide squat", extra_width=0.10, toe_out=0.15, depth=0.12,
                amplitude=(0.015, 0.03, 0.025, 0.04, 0.06, 0.08)),
     )
@@ -85,7 +87,7 @@ def posture_pose(posture: np.ndarray) -> pin.SE3:
 
 
 def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, rate_hz: float,
-                       rng: np.random.Generator, ramp_s: float = 1.5) -> np.ndarray:
+                       rng: np.random.Generator, ramp_s: float = 3.0) -> np.ndarray:
     """(N, 6) postures at `rate_hz`: the nominal posture plus slow sinusoids with random
     phases, faded in (smoothstep) over `ramp_s` so motion starts from rest."""
     n = int(round(duration * rate_hz))
@@ -97,22 +99,39 @@ def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, r
     return placement.nominal + fade * fade * (3 - 2 * fade) * wave
 
 
-def reachable_trajectory(kin, placement: Placement, duration: float, rate_hz: float,
-                         rng: np.random.Generator, shrink: float = 0.8, tries: int = 8) -> np.ndarray:
+def support_margin(kin, placement: Placement, posture: np.ndarray, q: np.ndarray) -> float:
+    """Distance (m) of the CoM's ground projection inside the convex hull of the eight
+    sole corners; negative outside."""
+    from scipy.spatial import ConvexHull
+
+    corners = np.vstack([(T.rotation @ kin.corners[s].T).T + T.translation
+                         for s, T in (("left", placement.left), ("right", placement.right))])
+    hull = ConvexHull(corners[:, :2])
+    com = posture_pose(posture).act(kin.com(q))[:2]
+    return float(-(hull.equations[:, :2] @ com + hull.equations[:, 2]).max())
+
+
+def feasible_trajectory(kin, placement: Placement, duration: float, rate_hz: float,
+                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10) -> np.ndarray:
     """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
-    is reachable within the joint limits of `kin`, so any robot gets a full stance."""
+    is reachable within the joint limits of `kin` and statically balanced (the CoM at
+    least a quarter sole width inside the support polygon), so any robot gets a stance
+    it can hold on a real floor."""
     from legcal_bench.kinematics import IKError
 
+    margin = 0.25 * kin.dims.sole_width
     base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng)
     for k in range(tries):
         traj = placement.nominal + (shrink ** k) * (base - placement.nominal)
         q = kin.q_init()
         try:
-            for p in traj:
+            for i, p in enumerate(traj):
                 T = posture_pose(p)
                 q = kin.solve(T.actInv(placement.left), T.actInv(placement.right), q)
+                if i % 5 == 0 and support_margin(kin, placement, p, q) < margin:
+                    raise IKError("CoM too close to the support polygon's edge")
             return traj
         except IKError:
             continue
-    raise IKError(f"stance {placement.stance.name}: no reachable posture motion for this robot "
-                  f"(the nominal posture itself may be out of reach)")
+    raise IKError(f"stance {placement.stance.name}: no reachable, balanced posture motion for this robot "
+                  f"(the nominal posture itself may be out of reach or off balance)")

@@ -7,7 +7,7 @@ from gymnasium.utils.env_checker import check_env
 import legcal_bench.envs as envs
 from legcal_bench.envs import STATIC_ROBOTS, env_id
 from legcal_bench.kinematics import pos_quat_to_se3
-from legcal_bench.stances import reachable_trajectory
+from legcal_bench.stances import feasible_trajectory
 
 from pathlib import Path
 
@@ -57,7 +57,7 @@ def test_reset_is_reproducible():
 
 def _run_stance(env, stance, seconds, seed=0):
     _, info = env.reset(seed=seed, options={"stance": stance})
-    traj = reachable_trajectory(env.nominal, env._placement, seconds, env.rate_hz, np.random.default_rng(seed))
+    traj = feasible_trajectory(env.nominal, env._placement, seconds, env.rate_hz, np.random.default_rng(seed))
     infos = [env.step(p)[4] for p in traj]
     return info, infos
 

@@ -77,12 +77,12 @@ class LegDesign:
     # mode, with torque limits of its actuators.
     servos: dict[str, Servo] = field(
         default_factory=lambda: {
-            "hip_pitch": Servo(1500.0, 30.0, 150.0),
-            "hip_roll": Servo(1500.0, 30.0, 150.0),
-            "hip_yaw": Servo(800.0, 16.0, 90.0),
-            "knee": Servo(2000.0, 40.0, 250.0),
-            "ankle_pitch": Servo(800.0, 16.0, 100.0),
-            "ankle_roll": Servo(500.0, 10.0, 60.0),
+            "hip_pitch": Servo(1500.0, 60.0, 150.0),
+            "hip_roll": Servo(1500.0, 60.0, 150.0),
+            "hip_yaw": Servo(800.0, 32.0, 90.0),
+            "knee": Servo(2000.0, 80.0, 250.0),
+            "ankle_pitch": Servo(800.0, 32.0, 100.0),
+            "ankle_roll": Servo(500.0, 20.0, 60.0),
         }
     )
     armature: float = 0.03
@@ -125,8 +125,10 @@ R_Y_P = ("hip_roll", "hip_yaw", "hip_pitch")
 
 BASE = LegDesign(name="base", hip_order=P_R_Y)
 
-# A3-like: pitch->roll->yaw, a 1.6 m class humanoid (~52 kg).
-A3 = replace(BASE, name="a3", hip_order=P_R_Y)
+# A3-like: pitch->roll->yaw, a 1.6 m class humanoid (~52 kg) with a shorter thigh
+# than shin and a heavier trunk.
+A3 = replace(BASE, name="a3", hip_order=P_R_Y, thigh=(0.002, 0.004, -0.34), shin=(-0.001, -0.003, -0.37),
+             pelvis_mass=30.0, hip_origin=(0.0, 0.09, -0.055))
 # A2-like: roll->yaw->pitch, a larger 1.7 m class humanoid (~66 kg) with its own
 # proportions (longer thigh, wider hips).
 A2 = replace(
@@ -135,7 +137,7 @@ A2 = replace(
     thigh=(0.001, 0.005, -0.40),
     hip_origin=(0.0, 0.105, -0.065),
 )
-# The controlled comparison: identical in every field but the hip ordering.
+# The controlled comparison: the base design, identical in every field but the hip ordering.
 PAIR_RYP = replace(BASE, name="pair_ryp", hip_order=R_Y_P)
 PAIR_PRY = replace(BASE, name="pair_pry", hip_order=P_R_Y)
 
