@@ -19,7 +19,10 @@ reads the offsets, the offsets strain the closed chain as on a real robot.
 The observation is what the robot logs: encoder angles, IMU specific force and
 angular rate (and ankle force/torque in the dynamic modes, where the robot has them).
 Ground truth (true angles, injected offsets, true sole and pelvis poses) is only in
-`info`. The reward is 0: the static env records data; it does not yet score actions.
+`info`. The reward is the information gain of the new frame: the increase of
+log det(H_data + eps I) of the segment's matched residuals (mm, mrad) linearised at the
+logged data, eps = 1 (see `legcal_bench.observability.InformationGain`), so excitation
+design can be learned; `info["log_det_information"]` is the running total.
 
 Reset options: `stance` (I, II, III, IV or standing; default I), `jitter_m` and
 `jitter_rad` (random re-placement of each sole, default 0.015 m and 0.05 rad). In the
@@ -38,6 +41,7 @@ import pinocchio as pin
 from gymnasium import spaces
 
 from legcal_bench.kinematics import IKError, LegKinematics, se3, se3_to_pos_quat, solve_standing
+from legcal_bench.observability import InformationGain
 from legcal_bench.offsets import resolve_offsets
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import SIDES, LegMap, LegMapError
@@ -109,6 +113,7 @@ class StaticDoubleSupportEnv(gym.Env):
             obs["ft"] = spaces.Box(-np.inf, np.inf, (2, 6), np.float64)
         self.observation_space = spaces.Dict(obs)
         self._placement = None
+        self._information = InformationGain(self.nominal)
 
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -140,7 +145,10 @@ class StaticDoubleSupportEnv(gym.Env):
             self._reset_physics(q_true)
         self._sole_ref = self._sole_poses_world()
         self._reachable = True
-        return self._observe(), self._info()
+        self._information.reset()
+        obs = self._observe()
+        self._information.add(obs["q_enc"], obs["imu_acc"])
+        return obs, self._info()
 
     def step(self, action):
         action = np.asarray(action, dtype=np.float64).reshape(6)
@@ -160,7 +168,9 @@ class StaticDoubleSupportEnv(gym.Env):
         else:
             self._advance_physics()
         self._t += self.dt
-        return self._observe(), 0.0, False, False, self._info()
+        obs = self._observe()
+        reward = self._information.add(obs["q_enc"], obs["imu_acc"])
+        return obs, reward, False, False, self._info()
 
     def render(self):
         if self.render_mode != "rgb_array":
@@ -288,4 +298,5 @@ class StaticDoubleSupportEnv(gym.Env):
             "sole_drift_rad": np.array([np.linalg.norm(pin.log3(D.rotation)) for D in drift]),
             "imu_true_acc": acc,
             "imu_true_gyro": gyro,
+            "log_det_information": self._information.logdet,
         }

@@ -49,22 +49,16 @@ def cmd_info(a: argparse.Namespace) -> int:
 
     legmap = load_robot(a.robot, a.mjcf)
     kin = LegKinematics(legmap)
-    m, d = kin.model, kin.data
-    import pinocchio as pin
-
-    pin.framesForwardKinematics(m, d, kin.q_full(np.zeros(12)))
-    R_B = d.oMf[kin.pelvis_frame].rotation
     info = {
         "name": legmap.name, "mjcf": str(legmap.mjcf), "hip_order": "->".join(r.replace("hip_", "") for r in legmap.hip_order),
         "dims_m": asdict(kin.dims), "knee_straight_deg": float(np.rad2deg(legmap.knee_straight_rad)),
         "held_joints_deg": {k: float(np.rad2deg(v)) for k, v in legmap.held_joints_rad.items()},
         "joints": [],
     }
+    axes = kin.joint_axes()
     for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
-        jid = m.getJointId(name)
-        axis_B = R_B.T @ d.oMi[jid].rotation @ _joint_axis(m, jid)
         info["joints"].append({
-            "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axis_B, 6).tolist(),
+            "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axes[i], 6).tolist(),
             "limits_deg": np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist()})
     if a.json:
         print(json.dumps(info, indent=2))
@@ -80,19 +74,6 @@ def cmd_info(a: argparse.Namespace) -> int:
     if info["held_joints_deg"]:
         print("  held joints (deg): " + ", ".join(f"{k} {v:+.2f}" for k, v in info["held_joints_deg"].items()))
     return 0
-
-
-def _joint_axis(model, jid: int) -> np.ndarray:
-    """Axis of a revolute joint in its own frame (Pinocchio stores it per joint type)."""
-    j = model.joints[jid]
-    short = j.shortname()
-    if short.endswith("RX"):
-        return np.array([1.0, 0, 0])
-    if short.endswith("RY"):
-        return np.array([0, 1.0, 0])
-    if short.endswith("RZ"):
-        return np.array([0, 0, 1.0])
-    return np.asarray(j.extract().axis, dtype=float)
 
 
 def cmd_render(a: argparse.Namespace) -> int:
@@ -118,6 +99,88 @@ def cmd_bench_env(a: argparse.Namespace) -> int:
 
     report = run_bench_env(a.robots, a.modes, a.out, seed=a.seed, progress=not a.quiet)
     print(report)
+    return 0
+
+
+def _parse_options(pairs: list[str]) -> dict:
+    out = {}
+    for pair in pairs or []:
+        if "=" not in pair:
+            raise ValueError(f"--option {pair!r}: write key=value")
+        k, v = pair.split("=", 1)
+        try:
+            out[k] = json.loads(v)
+        except json.JSONDecodeError:
+            out[k] = v
+    return out
+
+
+def cmd_calibrate(a: argparse.Namespace) -> int:
+    from legcal_bench.calibration import get_calibrator
+    from legcal_bench.recording import load_session
+    from legcal_bench.robots import load_robot
+
+    legmap = load_robot(a.robot, a.mjcf)
+    recordings = load_session(a.bags, legmap.joint_names)
+    options = _parse_options(a.option)
+    if a.setting is not None:
+        options["setting"] = a.setting
+    if a.solver is not None:
+        options["solver"] = a.solver
+    result = get_calibrator(a.calibrator, **options).calibrate(legmap, recordings)
+    result.settings["robot_spec"] = str(a.robot)
+    result.save(a.out)
+    if a.plots and result.conditioning.get("eigenvalues_H_data"):
+        from legcal_bench.observability import plot_observability
+
+        plot_observability(result.conditioning, legmap.joint_names, Path(a.plots) / "observability.png",
+                           title=f"{legmap.name} {result.calibrator}")
+    print(format_result(result, legmap.joint_names))
+    print(f"wrote {a.out}")
+    return 0
+
+
+def format_result(result, names: list[str]) -> str:
+    c = result.conditioning
+    lines = [f"{result.calibrator} on {result.robot}: offsets (deg)"]
+    for n in names:
+        lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}")
+    if result.pitch_sums_rad:
+        ps = result.pitch_sums_rad
+        lines.append("pitch sums (deg): " + ", ".join(f"{k} {np.rad2deg(v):+.4f}" for k, v in ps.items()))
+    if c:
+        lines.append(f"conditioning: kappa(J_data) {c['kappa_J_data']:.4g}, kappa(H_data) {c['kappa_H_data']:.4g}, "
+                     f"kappa(H_reg) {c['kappa_H_reg']:.4g}")
+    lines.append("time (s): " + ", ".join(f"{k} {v:.3f}" for k, v in result.timing_s.items()))
+    lines += [f"WARNING: {w}" for w in result.warnings]
+    return "\n".join(lines)
+
+
+def cmd_score(a: argparse.Namespace) -> int:
+    from legcal_bench.calibration import CalibrationResult
+    from legcal_bench.robots import load_robot
+    from legcal_bench.scoring import score
+
+    result = CalibrationResult.load(a.result)
+    legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot))
+    s = score(a.bags, result, legmap)
+    if not a.residuals:
+        s.get("heldout", {}).pop("foot_height_residuals_mm", None)
+    if a.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    if "recovery" in s:
+        r = s["recovery"]
+        print(f"recovery: RMS {r['rms_error_deg']:.4g} deg, max {r['max_error_deg']:.4g} deg; pitch-sum errors (deg) "
+              + ", ".join(f"{k} {v:+.4g}" for k, v in r["pitch_sum_error_deg"].items()))
+    if "heldout" in s:
+        h = s["heldout"]
+        print(f"held-out ({h['frames']} frames): foot height RMS {h['foot_height_rms_mm']['before']:.3f} -> "
+              f"{h['foot_height_rms_mm']['after']:.3f} mm, sole normal RMS {h['sole_normal_rms_deg']['before']:.3f} -> "
+              f"{h['sole_normal_rms_deg']['after']:.3f} deg")
+        if "foot_height_rms_true_mm" in h:
+            t = h["foot_height_rms_true_mm"]
+            print(f"  on the true held-out postures (noise-free): foot height RMS {t['before']:.4f} -> {t['after']:.4f} mm")
     return 0
 
 
@@ -163,6 +226,26 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--out", default="robot.png")
     r.set_defaults(func=cmd_render)
 
+    k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
+    _robot_args(k)
+    k.add_argument("--bags", required=True, help="directory of recordings (legcal-bench collect --out, or your own)")
+    k.add_argument("--calibrator", default="interfoot", help="registered calibrator name (default interfoot)")
+    k.add_argument("--setting", default=None, help="interfoot: operating (default), matched, a3_operating, a2_operating")
+    k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
+    k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="any calibrator option, e.g. --option lambda_q=0.1 (repeatable)")
+    k.add_argument("--out", default="result.json", help="result JSON (default result.json)")
+    k.add_argument("--plots", default=None, help="directory for the observability plot")
+    k.set_defaults(func=cmd_calibrate)
+
+    sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings")
+    sc.add_argument("--bags", required=True)
+    sc.add_argument("--result", required=True)
+    sc.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
+    sc.add_argument("--json", action="store_true")
+    sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
+    sc.set_defaults(func=cmd_score)
+
     b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
     b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", "examples/unitree_g1.legmap.yaml"])
     b.add_argument("--modes", nargs="+", default=["kinematic", "weld", "contact"])
@@ -174,6 +257,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from legcal_bench.calibration import CalibrationError
     from legcal_bench.kinematics import IKError
     from legcal_bench.offsets import OffsetSpecError
     from legcal_bench.recording import RecordingError
@@ -182,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except (LegMapError, RecordingError, OffsetSpecError, IKError, ValueError) as e:
+    except (LegMapError, RecordingError, OffsetSpecError, IKError, CalibrationError, ValueError) as e:
         print(f"legcal-bench {args.command}: error: {e}", file=sys.stderr)
         return 2
 
