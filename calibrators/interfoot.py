@@ -201,7 +201,9 @@ class _Problem:
         self.kin, self.segments, self.w, self.prior, self.knees = kin, segments, w, prior, knees
         self.sf = np.sqrt(w.lambda_f) * w.unit_scale
         self.sg = np.sqrt(w.lambda_g) * w.unit_scale
-        self.wq = np.sqrt(w.lambda_q) * np.array(list(w.w_q) * 2, dtype=float)
+        # Prior rows share the residual units (rad, or mrad in the matched setting).
+        self.wq = np.sqrt(w.lambda_q) * w.unit_scale * np.array(list(w.w_q) * 2, dtype=float)
+        self.sk = np.sqrt(w.lambda_knee) * w.unit_scale
         self._means = [None] * len(segments)
         self._cache = None
 
@@ -212,7 +214,7 @@ class _Problem:
     def prior_hessian(self) -> np.ndarray:
         H = np.diag(self.wq**2)
         if self.prior is not None and self.w.lambda_knee > 0:
-            H[self.knees, self.knees] += self.w.lambda_knee
+            H[self.knees, self.knees] += self.sk**2
         return H
 
     def means_at(self, dq: np.ndarray) -> list:
@@ -241,10 +243,9 @@ class _Problem:
             rows.append(self.wq * dq)
             jacs.append(np.diag(self.wq))
         if self.prior is not None and self.w.lambda_knee > 0:
-            sk = np.sqrt(self.w.lambda_knee)
-            rows.append(sk * (dq[self.knees] - self.prior))
+            rows.append(self.sk * (dq[self.knees] - self.prior))
             Jk = np.zeros((len(self.knees), 12))
-            Jk[np.arange(len(self.knees)), self.knees] = sk
+            Jk[np.arange(len(self.knees)), self.knees] = self.sk
             jacs.append(Jk)
         return np.concatenate(rows), np.vstack(jacs)
 

@@ -184,6 +184,20 @@ def cmd_score(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_reproduce(a: argparse.Namespace) -> int:
+    from legcal_bench.reproduce import reproduce
+
+    print(reproduce(a.out, progress=not a.quiet))
+    return 0
+
+
+def cmd_bench_speed(a: argparse.Namespace) -> int:
+    from legcal_bench.bench_speed import run_bench_speed
+
+    print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, progress=not a.quiet))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from legcal_bench.offsets import PRESETS_HELP
     from legcal_bench.sensors import SENSOR_PRESETS
@@ -245,6 +259,18 @@ def build_parser() -> argparse.ArgumentParser:
     sc.add_argument("--json", action="store_true")
     sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
     sc.set_defaults(func=cmd_score)
+
+    rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)")
+    rp.add_argument("--out", default="reports/reproduction")
+    rp.add_argument("--quiet", action="store_true")
+    rp.set_defaults(func=cmd_reproduce)
+
+    bs = sub.add_parser("bench-speed", help="time the inter-foot solve (analytic vs forward-difference Jacobians)")
+    bs.add_argument("--robot", default="a3")
+    bs.add_argument("--repeats", type=int, default=5)
+    bs.add_argument("--out", default="reports/bench_speed")
+    bs.add_argument("--quiet", action="store_true")
+    bs.set_defaults(func=cmd_bench_speed)
 
     b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
     b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", "examples/unitree_g1.legmap.yaml"])

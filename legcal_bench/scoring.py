@@ -31,7 +31,8 @@ def flat_ground_errors(kin: LegKinematics, q: np.ndarray, up_B: np.ndarray) -> t
     for k, (qk, u) in enumerate(zip(q, up_B)):
         TL, TR = kin.sole_poses(qk)
         h[k] = u @ (TL.translation - TR.translation)
-        ang[k] = [np.arccos(np.clip(T.rotation[:, 2] @ u, -1, 1)) for T in (TL, TR)]
+        # atan2 keeps precision near zero, where arccos loses half the digits.
+        ang[k] = [np.arctan2(np.linalg.norm(np.cross(T.rotation[:, 2], u)), T.rotation[:, 2] @ u) for T in (TL, TR)]
     return h, ang
 
 

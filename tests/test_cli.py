@@ -57,3 +57,31 @@ def test_render_writes_a_png(tmp_path, capsys):
 
     img = np.asarray(Image.open(out))
     assert img.shape == (480, 640, 3) and img.std() > 10  # not a blank frame
+
+
+def test_calibrate_then_score(tmp_path, capsys):
+    bags = tmp_path / "bags"
+    assert main(["collect", "--robot", "a2", "--mode", "kinematic", "--sensors", "zero", "--out", str(bags),
+                 "--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "2",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "result.json"
+    assert main(["calibrate", "--robot", "a2", "--bags", str(bags), "--calibrator", "interfoot",
+                 "--setting", "matched", "--out", str(out), "--plots", str(tmp_path)]) == 0
+    assert (tmp_path / "observability.png").stat().st_size > 10_000
+    result = json.loads(out.read_text())
+    assert set(result) >= {"offsets_rad", "pitch_sums_rad", "conditioning", "timing_s"}
+    capsys.readouterr()
+    assert main(["score", "--bags", str(bags), "--result", str(out), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["recovery"]["rms_error_deg"] < 1e-10
+    assert set(s["recovery"]["pitch_sum_error_deg"]) == {"left", "right", "right_minus_left"}
+    h = s["heldout"]
+    assert h["foot_height_rms_mm"]["after"] < 1e-6 < h["foot_height_rms_mm"]["before"]
+    assert h["sole_normal_rms_deg"]["after"] < 1e-8 < h["sole_normal_rms_deg"]["before"]
+
+
+def test_calibrate_errors_are_clear(tmp_path, capsys):
+    assert main(["calibrate", "--bags", str(tmp_path), "--out", str(tmp_path / "r.json")]) == 2
+    assert "no recordings" in capsys.readouterr().err
+    assert main(["calibrate", "--bags", str(tmp_path), "--calibrator", "nope", "--out", "x.json"]) == 2

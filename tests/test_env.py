@@ -118,3 +118,16 @@ def test_sim_model_must_match_joint_names(testbot_legmap):
 
     with pytest.raises(LegMapError, match="same 12 leg joint names"):
         envs.StaticDoubleSupportEnv(robot="a3", sim_robot=str(testbot_legmap))
+
+
+def test_reward_is_the_information_gain_of_each_frame():
+    env = envs.StaticDoubleSupportEnv(robot="a3", mode="kinematic", sensors="zero")
+    _, info = env.reset(seed=0, options={"stance": "I"})
+    traj = feasible_trajectory(env.nominal, env._placement, 4.0, 50, np.random.default_rng(0))
+    rewards = [env.step(p)[1] for p in traj]
+    total = env.unwrapped._information.logdet if hasattr(env, "unwrapped") else None
+    assert np.isfinite(rewards).all() and sum(rewards) > 20  # varied postures add information
+    assert np.isclose(sum(rewards), total - info["log_det_information"])
+    # Repeating the same posture adds almost nothing.
+    still = [env.step(traj[-1])[1] for _ in range(20)]
+    assert max(still[5:]) < 0.05 * max(rewards)
