@@ -10,7 +10,7 @@ export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: demo test install bench-env clean
+.PHONY: demo test install bench-env bench-standard clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -20,13 +20,17 @@ $(STAMP): pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/legcal-bench collect --robot a3 --mode weld --offsets paper --out runs/demo
+	rm -rf runs/demo
+	$(BIN)/legcal-bench bench --suite smoke --out runs/demo --data runs/demo/data
 
 test: $(STAMP)
 	$(BIN)/python -m pytest
 
 bench-env: $(STAMP)
 	$(BIN)/legcal-bench bench-env --out reports/bench_env
+
+bench-standard: $(STAMP)
+	$(BIN)/legcal-bench bench --suite standard
 
 clean:
 	rm -rf $(VENV) runs

@@ -23,7 +23,8 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from legcal_bench.calibrators.preprocess import FilterReport, PreprocessConfig, Segment, select_frames
+from legcal_bench.calibrators.preprocess import FilterReport, PreprocessConfig, select_frames
+from legcal_bench.calibrators.sensor_weights import noise_sigmas
 from legcal_bench.calibration import CalibrationError, CalibrationResult, Calibrator
 from legcal_bench.contact_residuals import (feet_residuals, flat_residuals, frame_kinematics,
                                             levelling_rotations, up_in_base)
@@ -42,6 +43,9 @@ class InterFootWeights:
     lambda_knee: float
     w_q: tuple[float, ...]  # per leg, in the platform's joint order (left leg; mirrored to the right)
     unit_scale: float = 1.0  # residual units: 1 = metres and radians, 1000 = mm and mrad
+    # Per-row 1/sigma instead of unit_scale (the "sensor" setting): feet translation,
+    # feet rotation, flat height, flat normal.
+    row_sigmas: tuple[float, float, float, float] | None = None
 
 
 # The paper's settings. W_q follows each platform's own joint order.
@@ -50,6 +54,9 @@ SETTINGS = {
     "a2_operating": InterFootWeights(1.0, 100.0, 1.0, 0.0, (0.5, 0.5, 0.5, 1, 1.5, 1.5)),
     "matched": InterFootWeights(1.0, 1.0, 0.0, 0.0, (1, 1, 1, 1, 1, 1), unit_scale=1000.0),
 }
+# "sensor": the matched setting with each row divided by its noise level from the
+# recordings' declared sensor model (falls back to "matched" for noise-free data).
+SETTING_NAMES = ("operating", "sensor", *SETTINGS)
 
 
 def operating_setting(legmap: LegMap) -> str:
@@ -75,8 +82,8 @@ class InterFootCalibrator(Calibrator):
                  lambda_knee: float | None = None, knee_prior_shift_rad: float = 0.0,
                  trim_fraction: float = 0.1, bound: float = 0.08, max_outer: int = 15,
                  n_max: int = 500, tol: float = 1e-10):
-        if setting not in ("operating", *SETTINGS):
-            raise CalibrationError(f"setting {setting!r}: use operating, {', '.join(SETTINGS)}")
+        if setting not in SETTING_NAMES:
+            raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in ("projected", "alternating"):
             raise CalibrationError(f"solver {solver!r}: use projected (default) or alternating (the paper's)")
         if jacobian not in ("analytic", "2-point"):
@@ -88,20 +95,31 @@ class InterFootCalibrator(Calibrator):
         self.trim_fraction, self.bound, self.max_outer, self.tol = float(trim_fraction), float(bound), int(max_outer), float(tol)
         self.preprocess = PreprocessConfig(n_max=int(n_max))
 
+    @classmethod
+    def benchmark_variants(cls) -> dict[str, dict]:
+        return {"operating": {"setting": "operating"}, "matched": {"setting": "matched"},
+                "sensor": {"setting": "sensor"}}
+
     def settings(self) -> dict:
         return {"setting": self.setting, "solver": self.solver, "jacobian": self.jacobian, **self.overrides,
                 "knee_prior_shift_rad": self.knee_prior_shift_rad, "trim_fraction": self.trim_fraction,
                 "bound": self.bound, "max_outer": self.max_outer, "preprocess": asdict(self.preprocess)}
 
     # ------------------------------------------------------------------ setup
-    def weights_for(self, legmap: LegMap) -> tuple[str, InterFootWeights]:
+    def weights_for(self, legmap: LegMap, recordings: list[Recording] | None = None) -> tuple[str, InterFootWeights]:
+        if self.setting == "sensor":
+            sig = noise_sigmas(recordings[0].sensor_model, LegKinematics(legmap).dims.leg_length) if recordings else None
+            if sig is None:
+                return "matched", replace(SETTINGS["matched"], **self.overrides)
+            rows = (sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"])
+            return "sensor", replace(SETTINGS["matched"], unit_scale=1.0, row_sigmas=rows, **self.overrides)
         name = operating_setting(legmap) if self.setting == "operating" else self.setting
         return name, replace(SETTINGS[name], **self.overrides)
 
     def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
         t0 = time.perf_counter()
         kin = LegKinematics(robot)
-        setting_name, w = self.weights_for(robot)
+        setting_name, w = self.weights_for(robot, recordings)
         warnings: list[str] = []
         for r in recordings:
             if r.joint_names != robot.joint_names:
@@ -199,8 +217,13 @@ class _Problem:
 
     def __init__(self, kin: LegKinematics, segments: list[_Prepared], w: InterFootWeights, prior, knees):
         self.kin, self.segments, self.w, self.prior, self.knees = kin, segments, w, prior, knees
-        self.sf = np.sqrt(w.lambda_f) * w.unit_scale
-        self.sg = np.sqrt(w.lambda_g) * w.unit_scale
+        if w.row_sigmas is None:
+            self.sf = np.sqrt(w.lambda_f) * w.unit_scale * np.ones(6)
+            self.sg = np.sqrt(w.lambda_g) * w.unit_scale * np.ones(5)
+        else:
+            st, sr, sh, sn = w.row_sigmas
+            self.sf = np.sqrt(w.lambda_f) * np.array([1 / st] * 3 + [1 / sr] * 3)
+            self.sg = np.sqrt(w.lambda_g) * np.array([1 / sh] + [1 / sn] * 4)
         # Prior rows share the residual units (rad, or mrad in the matched setting).
         self.wq = np.sqrt(w.lambda_q) * w.unit_scale * np.array(list(w.w_q) * 2, dtype=float)
         self.sk = np.sqrt(w.lambda_knee) * w.unit_scale
@@ -237,8 +260,8 @@ class _Problem:
                 M = means[s]
             rf, Jf = feet_residuals(fk.C, fk.G, M, mode)
             rg, Jg = flat_residuals(fk, seg.up_B, seg.R_WB)
-            rows += [self.sf * rf.ravel(), self.sg * rg.ravel()]
-            jacs += [self.sf * Jf.reshape(-1, 12), self.sg * Jg.reshape(-1, 12)]
+            rows += [(self.sf * rf).ravel(), (self.sg * rg).ravel()]
+            jacs += [(self.sf[:, None] * Jf).reshape(-1, 12), (self.sg[:, None] * Jg).reshape(-1, 12)]
         if self.w.lambda_q > 0:
             rows.append(self.wq * dq)
             jacs.append(np.diag(self.wq))

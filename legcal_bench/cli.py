@@ -198,6 +198,55 @@ def cmd_bench_speed(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(a: argparse.Namespace) -> int:
+    import time
+
+    from legcal_bench import bench
+    from legcal_bench.leaderboard import generate
+
+    if a.suite not in bench.SUITES:
+        raise ValueError(f"--suite {a.suite!r}: use one of {list(bench.SUITES)}")
+    cells = bench.plan(a.suite, robots=a.robots, modes=a.modes, seeds=a.seeds, calibrators=a.calibrators)
+    out = Path(a.out)
+    t0 = time.perf_counter()
+    counts = bench.run(cells, a.data, out / "results", workers=a.workers, scheduler=a.scheduler, progress=not a.quiet)
+    wall = time.perf_counter() - t0
+    text = generate(out)
+    print(text[text.index("## "):text.index("## Matched comparison")] if "## " in text else text)
+    print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {wall:.0f} s wall; "
+          f"leaderboard: {out / 'README.md'}")
+    return 0
+
+
+def cmd_sweep(a: argparse.Namespace) -> int:
+    from legcal_bench import bench
+
+    cells = bench.plan("sweep", robots=a.robots, modes=[a.mode], seeds=a.seeds, scales=a.scales,
+                       calibrators=a.calibrators,
+                       collect_overrides=dict(stance_s=a.stance_seconds, heldout=a.heldout))
+    out = Path(a.out)
+    counts = bench.run(cells, Path(a.out) / "data", out / "results", workers=a.workers, scheduler=a.scheduler,
+                       progress=not a.quiet)
+    rows: dict = {}
+    for c in cells:
+        r = json.loads(c.path(out / "results").read_text())
+        key = (bench.robot_label(c.robot), f"{c.calibrator}-{c.variant}", c.scale)
+        rows.setdefault(key, []).append(r["injected"]["score"]["recovery"]["rms_error_deg"])
+    print(f"{'robot':<12} {'calibrator-variant':<22} {'scale':>6} {'recovery RMS (deg), mean ± std':>32}")
+    for (robot, name, scale), v in sorted(rows.items()):
+        print(f"{robot:<12} {name:<22} {scale:>6g} {np.mean(v):>20.4f} ± {np.std(v):.4f}")
+    print(f"{counts['computed']} cells computed, {counts['skipped']} already done; results in {out / 'results'}")
+    return 0
+
+
+def cmd_leaderboard(a: argparse.Namespace) -> int:
+    from legcal_bench.leaderboard import generate
+
+    generate(a.out)
+    print(f"wrote {Path(a.out) / 'README.md'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     from legcal_bench.offsets import PRESETS_HELP
     from legcal_bench.sensors import SENSOR_PRESETS
@@ -259,6 +308,37 @@ def build_parser() -> argparse.ArgumentParser:
     sc.add_argument("--json", action="store_true")
     sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
     sc.set_defaults(func=cmd_score)
+
+    bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the leaderboard")
+    bn.add_argument("--suite", default="smoke", help="smoke (default), standard or full")
+    bn.add_argument("--robots", nargs="+", default=None, help="override the suite's robots")
+    bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes")
+    bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds")
+    bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
+    bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")
+    bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached")
+    bn.add_argument("--out", default="leaderboard", help="leaderboard root: results/ and README.md (default leaderboard)")
+    bn.add_argument("--quiet", action="store_true")
+    bn.set_defaults(func=cmd_bench)
+
+    sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask")
+    sw.add_argument("--robots", nargs="+", default=["a2", "a3"])
+    sw.add_argument("--calibrators", nargs="+", default=None)
+    sw.add_argument("--mode", default="weld")
+    sw.add_argument("--seeds", type=int, default=3)
+    sw.add_argument("--scales", nargs="+", type=float, default=[0.5, 1.0, 2.0], help="multiples of the paper's injection")
+    sw.add_argument("--stance-seconds", type=float, default=12.0)
+    sw.add_argument("--heldout", type=int, default=3)
+    sw.add_argument("--workers", type=int, default=2)
+    sw.add_argument("--scheduler", default=None, help="Dask scheduler address")
+    sw.add_argument("--out", default="runs/sweep")
+    sw.add_argument("--quiet", action="store_true")
+    sw.set_defaults(func=cmd_sweep)
+
+    lb = sub.add_parser("leaderboard", help="regenerate leaderboard/README.md and plots from the result files")
+    lb.add_argument("--out", default="leaderboard")
+    lb.set_defaults(func=cmd_leaderboard)
 
     rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)")
     rp.add_argument("--out", default="reports/reproduction")
