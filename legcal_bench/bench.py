@@ -34,6 +34,7 @@ from tqdm import tqdm
 
 REPO = Path(__file__).resolve().parents[1]
 NATIVE_DEG = 0.3  # factory residual: offsets drawn uniformly in +-0.3 deg
+HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
 
 
 @dataclass(frozen=True)
@@ -162,17 +163,30 @@ def collect_dataset(ds: Dataset, data_dir: str) -> str:
 def run_cell(cell: Cell, data_dir: str, results_dir: str) -> dict:
     """Calibrate both session sets of a cell, score, write the cell's JSON."""
     _single_thread()
-    from legcal_bench.calibration import get_calibrator
+    from legcal_bench.calibration import CalibrationError
     from legcal_bench.io_utils import atomic_write_json
-    from legcal_bench.offsets import PAPER_INJECTION
-    from legcal_bench.recording import list_segments, load_session, load_truth
     from legcal_bench.robots import load_robot
-    from legcal_bench.scoring import score
 
     robot = _resolve_robot(cell.robot)
     legmap = load_robot(robot)
     names = legmap.joint_names
-    out: dict = {"cell": asdict(cell), "robot": legmap.name}
+    out: dict = {"cell": asdict(cell), "robot": legmap.name, "joint_names": names}
+    try:
+        _calibrate_and_score(cell, legmap, data_dir, out)
+    except CalibrationError as e:
+        # A method that cannot calibrate this data is a result too, not a crash.
+        out["error"] = str(e)
+    atomic_write_json(cell.path(Path(results_dir)), out)
+    return out
+
+
+def _calibrate_and_score(cell: Cell, legmap, data_dir: str, out: dict) -> None:
+    from legcal_bench.calibration import get_calibrator
+    from legcal_bench.offsets import PAPER_INJECTION
+    from legcal_bench.recording import list_segments, load_session, load_truth
+    from legcal_bench.scoring import score
+
+    names = legmap.joint_names
     est = {}
     for inj in ("native", "injected"):
         bags = Path(data_dir) / cell.dataset(inj).name
@@ -186,15 +200,16 @@ def run_cell(cell: Cell, data_dir: str, results_dir: str) -> dict:
                                      if k.startswith("kappa") or k.startswith("eigenvalues")},
                     "offsets_rad": res.offsets_rad}
         if inj == "native" and residuals:
-            # Per-frame held-out foot heights (for the histograms), to 1 um.
-            out[inj]["heldout_foot_height_mm"] = {k: np.round(v, 3).tolist() for k, v in residuals.items()}
+            # Held-out foot heights as counts on fixed bins (for the pooled histograms).
+            out[inj]["heldout_foot_height_hist"] = {
+                "edges_mm": [float(HIST_EDGES_MM[0]), float(HIST_EDGES_MM[-1]), len(HIST_EDGES_MM) - 1],
+                **{k: np.histogram(np.clip(v, HIST_EDGES_MM[0], HIST_EDGES_MM[-1]), HIST_EDGES_MM)[0].tolist()
+                   for k, v in residuals.items()}}
         out[inj]["truth_offsets_rad"] = load_truth(list_segments(bags)[0]).offsets.tolist()
     injection = cell.scale * np.array([PAPER_INJECTION[r] for r in legmap.joint_roles])
     delta = est["injected"] - est["native"] - injection
     out["paired_delta_deg"] = {n: float(np.rad2deg(v)) for n, v in zip(names, delta)}
     out["paired_delta_rms_deg"] = float(np.rad2deg(np.sqrt(np.mean(delta**2))))
-    atomic_write_json(cell.path(Path(results_dir)), out)
-    return out
 
 
 # ------------------------------------------------------------------ driver

@@ -212,7 +212,8 @@ def cmd_bench(a: argparse.Namespace) -> int:
     counts = bench.run(cells, a.data, out / "results", workers=a.workers, scheduler=a.scheduler, progress=not a.quiet)
     wall = time.perf_counter() - t0
     text = generate(out)
-    print(text[text.index("## "):text.index("## Matched comparison")] if "## " in text else text)
+    tables = text[text.index("## "):text.index("## Matched comparison")] if "## " in text else text
+    print("\n".join(line for line in tables.splitlines() if not line.startswith("![")).strip() + "\n")
     print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {wall:.0f} s wall; "
           f"leaderboard: {out / 'README.md'}")
     return 0
