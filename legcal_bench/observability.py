@@ -134,8 +134,6 @@ class InformationGain:
     SCALE = 1000.0
 
     def __init__(self, kin):
-        from legcal_bench.kinematics import LegKinematics  # noqa: F401 - type only
-
         self.kin = kin
         self.R_BI = kin.imu_pose(np.zeros(12)).rotation
         self.reset()

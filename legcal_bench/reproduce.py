@@ -8,9 +8,7 @@ show both the paper's alternating solver and the default (projected) solver.
 
 from __future__ import annotations
 
-import json
 import platform
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np

@@ -3,7 +3,6 @@
 import mujoco
 import numpy as np
 import pinocchio as pin
-import pytest
 
 from legcal_bench.kinematics import LegKinematics, se3
 from legcal_bench.robots import load_robot
