@@ -125,7 +125,7 @@ R_Y_P = ("hip_roll", "hip_yaw", "hip_pitch")
 
 BASE = LegDesign(name="base", hip_order=P_R_Y)
 
-# A3-like: pitch->roll->yaw, a 1.6 m class humanoid (~52 kg) with a shorter thigh
+# A3-like: pitch->roll->yaw, a 1.6 m class humanoid (~55 kg) with a shorter thigh
 # than shin and a heavier trunk.
 A3 = replace(BASE, name="a3", hip_order=P_R_Y, thigh=(0.002, 0.004, -0.34), shin=(-0.001, -0.003, -0.37),
              pelvis_mass=30.0, hip_origin=(0.0, 0.09, -0.055))
