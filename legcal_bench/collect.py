@@ -95,7 +95,7 @@ def record_segment(env: StaticDoubleSupportEnv, kind: str, stance: str, duration
         if progress is not None:
             progress.update(1)
     stack = {k: np.array([o[k] for o in obs_l]) for k in obs_l[0]}
-    truth = {k: np.array([i[k] for i in info_l]) for k in info_l[0] if k not in ("stance",)}
+    truth = {k: np.array([i[k] for i in info_l]) for k in info_l[0] if k not in ("stance", "log_det_information")}
     return stack, truth
 
 
@@ -104,7 +104,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
     env = StaticDoubleSupportEnv(
         robot=cfg.robot, mjcf=cfg.mjcf, sim_robot=cfg.sim_robot, mode=cfg.mode, offsets=cfg.offsets,
         sensors=cfg.sensors, rate_hz=cfg.rate_hz, offset_seed=cfg.seed,
-        knee_straight_error_rad=cfg.knee_straight_error_rad)
+        knee_straight_error_rad=cfg.knee_straight_error_rad, information_reward=False)
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0])))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
