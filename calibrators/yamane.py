@@ -32,7 +32,7 @@ from scipy.sparse import csr_matrix
 from legcal_bench.calibration import CalibrationError, CalibrationResult, Calibrator
 from legcal_bench.calibrators.preprocess import PreprocessConfig, select_frames
 from legcal_bench.calibrators.sensor_weights import noise_sigmas
-from legcal_bench.contact_residuals import up_in_base
+from legcal_bench.contact_residuals import frame_kinematics, up_in_base
 from legcal_bench.kinematics import LegKinematics
 from legcal_bench.observability import pitch_sums
 from legcal_bench.recording import Recording
@@ -133,7 +133,8 @@ class YamaneCalibrator(Calibrator):
 class _YamaneProblem:
     def __init__(self, kin, Q, up, corners, w_h, w_imu):
         self.kin, self.Q, self.up, self.w_h, self.w_imu = kin, Q, up, w_h, w_imu
-        self.c = np.vstack([corners["left"], corners["right"]])  # (8, 3) in the sole frames
+        self.c = np.vstack([corners["left"], corners["right"]]).reshape(2, 4, 3)  # corners in the sole frames
+        self.c_skew = np.array([[pin.skew(c) for c in side] for side in self.c])  # (2, 4, 3, 3)
         self._cache = None
 
     def _eval(self, x):
@@ -142,25 +143,13 @@ class _YamaneProblem:
         kin, n = self.kin, len(self.Q)
         dq, ang = x[:12], x[12:].reshape(n, 2)
         R, dR_roll, dR_pitch = _rot(ang[:, 0], ang[:, 1])
-        m, d = kin.model, kin.data
-        Tr, Tt, Jl = np.empty((n, 2, 3, 3)), np.empty((n, 2, 3)), np.empty((n, 2, 6, 6))
-        qf = kin.q_neutral.copy()
-        fB = kin.pelvis_frame
-        for k in range(n):
-            qf[kin.leg_q_idx] = self.Q[k] + dq
-            pin.computeJointJacobians(m, d, qf)
-            pin.updateFramePlacements(m, d)
-            B = d.oMf[fB]
-            for s, side in enumerate(("left", "right")):
-                f = kin.sole_frame[side]
-                T = B.actInv(d.oMf[f])
-                Tr[k, s], Tt[k, s] = T.rotation, T.translation
-                Jl[k, s] = pin.getFrameJacobian(m, d, f, pin.LOCAL)[:, kin.leg_v_idx[6 * s:6 * s + 6]]
-        C = self.c.reshape(2, 4, 3)
-        P = (np.einsum("sic,nsac->nsia", C, Tr) + Tt[:, :, None, :]).reshape(n, 8, 3)
+        fk = frame_kinematics(kin, self.Q + dq)
+        Tr = np.stack([fk.R_L, fk.R_R], axis=1)  # (n, 2, 3, 3)
+        Tt = np.stack([fk.p_L, fk.p_R], axis=1)
+        Jl = np.stack([fk.J_L, fk.J_R], axis=1)
+        P = (np.einsum("sic,nsac->nsia", self.c, Tr) + Tt[:, :, None, :]).reshape(n, 8, 3)
         # Corner velocity in the sole frame, v + w x c = J_v - [c]x J_w, then in the pelvis frame.
-        skew = np.array([[pin.skew(c) for c in side] for side in C])  # (2, 4, 3, 3)
-        local = Jl[:, :, None, :3, :] - np.einsum("sivw,nswc->nsivc", skew, Jl[:, :, 3:, :])
+        local = Jl[:, :, None, :3, :] - np.einsum("sivw,nswc->nsivc", self.c_skew, Jl[:, :, 3:, :])
         world = np.einsum("nsab,nsibc->nsiac", Tr, local)
         Jp = np.zeros((n, 8, 3, 12))
         Jp[:, :4, :, :6], Jp[:, 4:, :, 6:] = world[:, 0], world[:, 1]

@@ -143,7 +143,7 @@ class StaticDoubleSupportEnv(gym.Env):
         self._q_cmd = q_true - self.offsets if self._standing else self._ik(self.nominal, self._posture, q_true)
         self._q_true = q_true
         if self.mode == "kinematic":
-            self._imu_hist = [self._imu_world(q_true, self._posture)] * 3
+            self._imu_hist = [self._imu_world(q_true, self._posture)] * 2
         else:
             self._reset_physics(q_true)
         self._sole_ref = self._sole_poses_world()
@@ -254,7 +254,7 @@ class StaticDoubleSupportEnv(gym.Env):
             return sd[adr["imu_acc"]:adr["imu_acc"] + 3].copy(), sd[adr["imu_gyro"]:adr["imu_gyro"] + 3].copy()
         # Kinematic mode: each frame is a static posture (quasi-static), so the
         # accelerometer reads gravity alone; the rate is the backward difference.
-        _, T1, T2 = self._imu_hist
+        T1, T2 = self._imu_hist
         gyro = pin.log3(T1.rotation.T @ T2.rotation) / self.dt
         return T2.rotation.T @ (-GRAVITY), gyro
 

@@ -25,7 +25,7 @@ from __future__ import annotations
 import json
 import os
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -252,8 +252,3 @@ def run(cells: list[Cell], data_dir: str | Path, results_dir: str | Path, execut
         if client is not None:
             client.close()
     return {"cells": len(cells), "computed": len(todo), "skipped": len(cells) - len(todo)}
-
-
-def with_collect(cells: list[Cell], **overrides) -> list[Cell]:
-    col = tuple(sorted(overrides.items()))
-    return [replace(c, collect=col) for c in cells]

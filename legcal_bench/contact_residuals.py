@@ -60,7 +60,8 @@ class FrameKinematics:
 
     C: np.ndarray  # (N, 4, 4) inter-foot transforms, homogeneous
     G: np.ndarray  # (N, 6, 12) right-perturbation Jacobian of C w.r.t. dq
-    p_rel: np.ndarray  # (N, 3) p_L - p_R in the pelvis frame
+    p_L: np.ndarray  # (N, 3) sole positions in the pelvis frame
+    p_R: np.ndarray
     R_L: np.ndarray  # (N, 3, 3) sole rotations in the pelvis frame
     R_R: np.ndarray
     J_L: np.ndarray  # (N, 6, 6) local sole Jacobians w.r.t. the leg's own joints
@@ -90,14 +91,14 @@ def frame_kinematics(kin: LegKinematics, Q: np.ndarray) -> FrameKinematics:
     G = np.empty((n, 6, 12))
     G[:, :, :6] = -adjoint(inverse(C)) @ J_L
     G[:, :, 6:] = J_R
-    return FrameKinematics(C, G, TL[:, :3, 3] - TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], J_L, J_R)
+    return FrameKinematics(C, G, TL[:, :3, 3], TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], J_L, J_R)
 
 
 def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with_jacobian: bool = True):
     """(N, 5) flat-ground residuals and (N, 5, 12) their Jacobians."""
     n = len(up_B)
     r = np.empty((n, 5))
-    r[:, 0] = np.einsum("ni,ni->n", up_B, fk.p_rel)
+    r[:, 0] = np.einsum("ni,ni->n", up_B, fk.p_L - fk.p_R)
     zL = np.einsum("nij,nj->ni", R_WB, fk.R_L[:, :, 2])
     zR = np.einsum("nij,nj->ni", R_WB, fk.R_R[:, :, 2])
     r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]

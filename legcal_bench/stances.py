@@ -19,8 +19,6 @@ import pinocchio as pin
 
 from legcal_bench.kinematics import RobotDims, pose_xyz_rpy
 
-POSTURE_NAMES = ("x", "y", "z", "roll", "pitch", "yaw")
-
 
 @dataclass(frozen=True)
 class Stance:

@@ -40,8 +40,8 @@ def toy_calibrator(tmp_path, monkeypatch):
 
 def test_a_third_party_calibrator_runs_through_the_runner(tmp_path, toy_calibrator):
     assert "toy" in available_calibrators()
-    cells = bench.with_collect(bench.plan("smoke", robots=["a3"], modes=["kinematic"], seeds=1,
-                                          calibrators=["toy", "zero"]), **TINY)
+    cells = bench.plan("smoke", robots=["a3"], modes=["kinematic"], seeds=1, calibrators=["toy", "zero"],
+                       collect_overrides=TINY)
     assert {(c.calibrator, c.variant) for c in cells} == {("toy", "default"), ("zero", "default")}
     with ThreadPoolExecutor(2) as ex:
         counts = bench.run(cells, tmp_path / "data", tmp_path / "lb" / "results", executor=ex, progress=False)
@@ -64,8 +64,8 @@ def test_a_third_party_calibrator_runs_through_the_runner(tmp_path, toy_calibrat
 def test_two_cell_sweep_on_a_dask_local_cluster(tmp_path):
     from distributed import LocalCluster
 
-    cells = bench.with_collect(bench.plan("sweep", robots=["a2"], modes=["kinematic"], seeds=1, scales=(0.5, 1.0),
-                                          calibrators=["zero"]), **TINY)
+    cells = bench.plan("sweep", robots=["a2"], modes=["kinematic"], seeds=1, scales=(0.5, 1.0),
+                       calibrators=["zero"], collect_overrides=TINY)
     assert len(cells) == 2
     with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster:
         counts = bench.run(cells, tmp_path / "data", tmp_path / "results", scheduler=cluster.scheduler_address,

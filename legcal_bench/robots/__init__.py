@@ -56,7 +56,3 @@ def load_robot(spec: str | Path, mjcf: str | Path | None = None) -> LegMap:
             raise LegMapError(f"--mjcf {path} does not exist")
         legmap = replace(legmap, mjcf=path)
     return legmap
-
-
-def robots_with_tag(tag: str) -> list[str]:
-    return [name for name, e in BUILTIN.items() if tag in e.tags]

@@ -41,7 +41,6 @@ class Scene:
     qpos_adr: np.ndarray  # (12,) leg joints
     dof_adr: np.ndarray  # (12,)
     free_qpos_adr: int  # pelvis free joint (position 3 + quaternion wxyz 4)
-    free_dof_adr: int
     pelvis_body: int
     sole_site: dict[str, int]
     corner_sites: dict[str, list[int]]
@@ -199,7 +198,7 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         model=model, legmap=legmap, mode=mode,
         qpos_adr=np.array([model.jnt_qposadr[j] for j in joints]),
         dof_adr=np.array([model.jnt_dofadr[j] for j in joints]),
-        free_qpos_adr=int(model.jnt_qposadr[free]), free_dof_adr=int(model.jnt_dofadr[free]),
+        free_qpos_adr=int(model.jnt_qposadr[free]),
         pelvis_body=mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, legmap.pelvis),
         sole_site={s: sid(n) for s, n in sole_site.items()},
         corner_sites={s: [sid(n) for n in names] for s, names in corner_sites.items()},
