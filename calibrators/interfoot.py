@@ -23,15 +23,17 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 from scipy.optimize import least_squares
 
-from legcal_bench.calibrators.preprocess import FilterReport, PreprocessConfig, select_frames
-from legcal_bench.calibrators.sensor_weights import noise_sigmas
-from legcal_bench.calibration import CalibrationError, CalibrationResult, Calibrator
-from legcal_bench.contact_residuals import (feet_residuals, flat_residuals, frame_kinematics,
-                                            levelling_rotations, up_in_base)
-from legcal_bench.lie import frechet_mean
-from legcal_bench.kinematics import LegKinematics
-from legcal_bench.observability import analyze, observability_warnings, pitch_sums
-from legcal_bench.recording import Recording
+from legcal_bench import paper
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator
+from legcal_bench.data.recording import Recording
+from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.estimation.observability import analyze, observability_warnings
+from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, select_frames
+from legcal_bench.estimation.residuals import feet_residuals, flat_residuals
+from legcal_bench.geometry.lie import frechet_mean
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
 
@@ -50,9 +52,9 @@ class InterFootWeights:
 
 # The paper's settings. W_q follows each platform's own joint order.
 SETTINGS = {
-    "a3_operating": InterFootWeights(2.0, 10.0, 0.01, 100.0, (1, 1, 1, 1.5, 1.5, 1.5)),
-    "a2_operating": InterFootWeights(1.0, 100.0, 1.0, 0.0, (0.5, 0.5, 0.5, 1, 1.5, 1.5)),
-    "matched": InterFootWeights(1.0, 1.0, 0.0, 0.0, (1, 1, 1, 1, 1, 1), unit_scale=1000.0),
+    "a3_operating": InterFootWeights(**paper.A3_OPERATING),
+    "a2_operating": InterFootWeights(**paper.A2_OPERATING),
+    "matched": InterFootWeights(1.0, 1.0, 0.0, 0.0, (1, 1, 1, 1, 1, 1), unit_scale=paper.MATCHED_UNIT_SCALE),
 }
 # "sensor": the matched setting with each row divided by its noise level from the
 # recordings' declared sensor model (falls back to "matched" for noise-free data).
@@ -80,8 +82,8 @@ class InterFootCalibrator(Calibrator):
     def __init__(self, setting: str = "operating", solver: str = "projected", jacobian: str = "analytic",
                  lambda_f: float | None = None, lambda_g: float | None = None, lambda_q: float | None = None,
                  lambda_knee: float | None = None, knee_prior_shift_rad: float = 0.0,
-                 trim_fraction: float = 0.1, bound: float = 0.08, max_outer: int = 15,
-                 n_max: int = 500, tol: float = 1e-10):
+                 trim_fraction: float = paper.TRIM_FRACTION, bound: float = paper.OFFSET_BOUND_RAD,
+                 max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10):
         if setting not in SETTING_NAMES:
             raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in ("projected", "alternating"):
@@ -129,7 +131,7 @@ class InterFootCalibrator(Calibrator):
             raise CalibrationError("no stance recordings (kind 'stance'): record at least one static "
                                    "double-support stance, better four (I-IV)")
         # Preprocessing on the raw encoders.
-        R_BI = kin.imu_pose(np.zeros(12)).rotation
+        R_BI = kin.R_BI
         segments: list[_Prepared] = []
         reports: list[FilterReport] = []
         for r in stances:
@@ -309,7 +311,7 @@ class _Problem:
             self._cache = None
             fun, jac = self._fun_jac("fixed", means)
             sol = least_squares(fun, x, jac=jac if cal.jacobian == "analytic" else "2-point", bounds=(lb, ub),
-                                method="trf", ftol=1e-8, max_nfev=200)
+                                method="trf", ftol=paper.INNER_FTOL, max_nfev=paper.INNER_MAX_ITERATIONS)
             moved = np.abs(sol.x - x).max()
             x = sol.x
             history.append(x.tolist())

@@ -29,13 +29,14 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 from scipy.sparse import csr_matrix
 
-from legcal_bench.calibration import CalibrationError, CalibrationResult, Calibrator
-from legcal_bench.calibrators.preprocess import PreprocessConfig, select_frames
-from legcal_bench.calibrators.sensor_weights import noise_sigmas
-from legcal_bench.contact_residuals import frame_kinematics, up_in_base
-from legcal_bench.kinematics import LegKinematics
-from legcal_bench.observability import pitch_sums
-from legcal_bench.recording import Recording
+from legcal_bench import paper
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator
+from legcal_bench.data.recording import Recording
+from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.estimation.preprocess import PreprocessConfig, select_frames
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
 
@@ -58,7 +59,7 @@ class YamaneCalibrator(Calibrator):
     name = "yamane"
 
     def __init__(self, weights: str = "default", w_h: float | None = None, w_imu: float | None = None,
-                 n_max: int = 500, bound: float = 0.08, tol: float = 1e-10):
+                 n_max: int = paper.N_MAX_PER_STANCE, bound: float = paper.OFFSET_BOUND_RAD, tol: float = 1e-10):
         if weights not in ("default", "sensor"):
             raise CalibrationError(f"weights {weights!r}: use default or sensor")
         self.weights, self.w_h_opt, self.w_imu_opt = weights, w_h, w_imu
@@ -98,7 +99,7 @@ class YamaneCalibrator(Calibrator):
         if not Q:
             raise CalibrationError("no usable frames in any stance after filtering")
         Q, acc = np.vstack(Q), np.vstack(acc)
-        up = up_in_base(acc, kin.imu_pose(np.zeros(12)).rotation)
+        up = up_in_base(acc, kin.R_BI)
         w_h, w_imu = self._weights(stances, kin)
         n = len(Q)
         # Start each root orientation at the IMU's tilt: up = R^T e_z.

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from legcal_bench.calibration import CalibrationResult, Calibrator
-from legcal_bench.recording import Recording
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator
+from legcal_bench.data.recording import Recording
 from legcal_bench.robots.legmap import LegMap
 
 

@@ -1,7 +1,12 @@
-"""Gymnasium environments. Ids are registered in one loop below.
+"""Gymnasium environments, registered in one loop with string entry points.
 
-    import gymnasium as gym, legcal_bench.envs
-    env = gym.make("legcal/StaticDoubleSupport-A3-v0", mode="weld")
+Either import the package, or let Gymnasium import it from the id:
+
+    import gymnasium as gym
+    env = gym.make("legcal_bench.envs:legcal/StaticDoubleSupport-A3-v0", mode="weld")
+
+    import legcal_bench.envs
+    gym.register_envs(legcal_bench.envs)  # no-op that keeps linters from dropping the import
     env = gym.make("legcal/StaticDoubleSupport-Path-v0", robot="path/to/robot.legmap.yaml")
 """
 
@@ -9,26 +14,24 @@ from __future__ import annotations
 
 from gymnasium.envs.registration import register, registry
 
-from legcal_bench.envs.static_double_support import StaticDoubleSupportEnv
-
-# id suffix -> default robot (None: the robot is given by path, `robot=...`).
+NAMESPACE = "legcal"
+STATIC_ENTRY_POINT = "legcal_bench.envs.static_double_support:StaticDoubleSupportEnv"
+# id suffix -> default robot (None: the robot is given by path, `robot=...`, and is required).
 STATIC_ROBOTS = {"A2": "a2", "A3": "a3", "PairRYP": "pair_ryp", "PairPRY": "pair_pry", "Path": None}
 MAX_EPISODE_STEPS = 1000
 
 
 def env_id(suffix: str) -> str:
-    return f"legcal/StaticDoubleSupport-{suffix}-v0"
+    return f"{NAMESPACE}/StaticDoubleSupport-{suffix}-v0"
 
 
 def register_envs() -> None:
     for suffix, robot in STATIC_ROBOTS.items():
-        if env_id(suffix) in registry:
-            continue
-        kwargs = {} if robot is None else {"robot": robot}
-        register(id=env_id(suffix), entry_point=StaticDoubleSupportEnv, kwargs=kwargs,
-                 max_episode_steps=MAX_EPISODE_STEPS)
+        if env_id(suffix) not in registry:
+            register(id=env_id(suffix), entry_point=STATIC_ENTRY_POINT,
+                     kwargs={} if robot is None else {"robot": robot}, max_episode_steps=MAX_EPISODE_STEPS)
 
 
 register_envs()
 
-__all__ = ["StaticDoubleSupportEnv", "STATIC_ROBOTS", "env_id", "register_envs"]
+__all__ = ["STATIC_ROBOTS", "env_id", "register_envs"]

@@ -1,0 +1,1 @@
+"""Walking policies (our own frozen policies, and the runner for published ones)."""

@@ -1,13 +1,29 @@
-"""Robot registry: built-in robots by name (with tags), any robot by leg-map path."""
+"""Robot registry: built-in robots by name (with tags), example robots shipped with
+the package, and any robot by the path of its leg map.
+
+A robot reference ("spec") is a built-in name (`a3`), a leg-map path, or
+`examples/<file>.legmap.yaml` (found in the working directory first, then among the
+installed examples). `resolve_robot` turns a spec into a reference that works from any
+folder (the name, or an absolute path); `robot_label` gives its short name.
+"""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-from legcal_bench.robots.legmap import LegMap, LegMapError, load_legmap
+from legcal_bench.errors import LegMapError, MissingModelError
+from legcal_bench.robots.legmap import LegMap, load_legmap
 
 ASSETS = Path(__file__).parent / "assets"
+LEGMAP_SUFFIXES = (".legmap.yaml", ".yaml", ".yml")
+
+
+def examples_dir() -> Path:
+    """Where the example leg maps are (a checkout's `examples/`, or the installed copy)."""
+    import legcal_bench.examples
+
+    return Path(legcal_bench.examples.__file__).parent
 
 
 @dataclass(frozen=True)
@@ -34,25 +50,56 @@ BUILTIN: dict[str, RobotEntry] = {
 }
 
 
+def robot_label(spec: str | Path) -> str:
+    """Short name of a robot reference: the built-in name, or the leg-map file name
+    without its suffix."""
+    s = str(spec)
+    if s in BUILTIN:
+        return s
+    name = Path(s).name
+    for suffix in LEGMAP_SUFFIXES:
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
+def resolve_robot(spec: str | Path) -> str:
+    """A reference to the same robot that works from any folder: the built-in name, or
+    the absolute path of its leg map."""
+    s = str(spec)
+    if s in BUILTIN:
+        return s
+    p = Path(s)
+    if p.is_file():
+        return str(p.resolve())
+    if p.parts[:1] == ("examples",) and len(p.parts) == 2 and (examples_dir() / p.name).is_file():
+        return str((examples_dir() / p.name).resolve())
+    if s.endswith(LEGMAP_SUFFIXES):
+        raise LegMapError(f"leg map {p.resolve()} does not exist")
+    raise LegMapError(f"unknown robot {s!r}: use a built-in name ({', '.join(BUILTIN)}) "
+                      "or the path of a leg-map YAML (see docs/leg-map.md)")
+
+
 def load_robot(spec: str | Path, mjcf: str | Path | None = None) -> LegMap:
     """A built-in robot by name, or any robot by the path of its leg-map YAML.
 
     `mjcf` overrides the leg map's MJCF path (same joints, another model file).
     """
-    spec_s = str(spec)
-    if spec_s in BUILTIN:
-        legmap = load_legmap(BUILTIN[spec_s].legmap_path)
-    elif spec_s.endswith((".yaml", ".yml")) or Path(spec_s).is_file():
-        legmap = load_legmap(spec_s)
-    else:
-        raise LegMapError(
-            f"unknown robot {spec_s!r}: use a built-in name ({', '.join(BUILTIN)}) "
-            "or the path of a leg-map YAML (see docs/leg-map.md)")
+    ref = resolve_robot(spec)
+    legmap = load_legmap(BUILTIN[ref].legmap_path if ref in BUILTIN else ref)
     if mjcf is not None:
-        from dataclasses import replace
-
         path = Path(mjcf).resolve()
         if not path.is_file():
-            raise LegMapError(f"--mjcf {path} does not exist")
+            raise MissingModelError(f"--mjcf {path} does not exist")
         legmap = replace(legmap, mjcf=path)
     return legmap
+
+
+def available(spec: str | Path) -> str | None:
+    """None if the robot loads, else why not (e.g. its MJCF is missing): suites use it
+    to skip, with that message, a robot whose model is not on this machine."""
+    try:
+        load_robot(spec)
+    except MissingModelError as e:
+        return str(e)
+    return None

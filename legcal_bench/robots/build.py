@@ -16,7 +16,7 @@ import numpy as np
 import yaml
 from dm_control import mjcf
 
-from legcal_bench.io_utils import atomic_write_text
+from legcal_bench.files.atomic import atomic_write_text
 from legcal_bench.robots.design import DESIGNS, LEG_ROLES, ROLE_AXIS, LegDesign
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, Joint, Leg, LegMap
 

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field, replace
 
 HIP_ROLES = ("hip_pitch", "hip_roll", "hip_yaw")
 LEG_ROLES = HIP_ROLES + ("knee", "ankle_pitch", "ankle_roll")
+# The parallel pitch chain of a leg: what orientation alone sees only as a sum.
+PITCH_ROLES = ("hip_pitch", "knee", "ankle_pitch")
 ROLE_AXIS = {
     "hip_pitch": (0.0, 1.0, 0.0),
     "hip_roll": (1.0, 0.0, 0.0),

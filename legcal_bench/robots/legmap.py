@@ -14,15 +14,12 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from legcal_bench.errors import LegMapError, MissingModelError
 from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 
 SCHEMA = "legcal-legmap/1"
 SIDES = ("left", "right")
 CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
-
-
-class LegMapError(ValueError):
-    """A leg map that cannot be used; the message names the field and the fix."""
 
 
 @dataclass(frozen=True)
@@ -174,8 +171,8 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
     if not mjcf.is_absolute():
         mjcf = (base_dir / mjcf).resolve()
     if not mjcf.is_file():
-        raise LegMapError(f"{where}: field 'mjcf' points to {mjcf}, which does not exist; "
-                          "give a path relative to the leg map or an absolute path")
+        raise MissingModelError(f"{where}: field 'mjcf' points to {mjcf}, which does not exist; "
+                                "give a path relative to the leg map or an absolute path")
     legs_d = data["legs"]
     if not isinstance(legs_d, dict) or set(legs_d) != set(SIDES):
         raise LegMapError(f"{where}: field 'legs' must have exactly the keys 'left' and 'right'")

@@ -1,6 +1,6 @@
 """Compose a MuJoCo scene around any robot MJCF (dm_control's mjcf), per floor mode.
 
-The robot file is loaded as it is; the scene only adds: a floor, the leg map's frames
+The robot file is loaded as it is; the scene only adds: the arena's floor, the leg map's frames
 as sites (sole, corners, IMU, F/T) where the MJCF does not have them, our own IMU and
 F/T sensors on those sites, joint equalities that hold non-leg joints, and in weld
 mode a mocap anchor per foot with a stiff weld to the sole site. Kinematics are
@@ -19,7 +19,9 @@ import numpy as np
 from dm_control import mjcf
 from scipy.spatial.transform import Rotation
 
-from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap, LegMapError
+from legcal_bench.errors import ConfigError, LegMapError
+from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
+from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
 MODES = ("kinematic", "weld", "contact")
 # Servo-held feet: MuJoCo's default weld lets them drift by centimetres.
@@ -28,9 +30,6 @@ WELD_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
 # Weight of the weld's angular residual (a length): at 1 the soles still tilt by
 # hundredths of a degree under the closed-chain strain; servo-held feet do not.
 WELD_TORQUESCALE = 10.0
-FLOOR_FRICTION = (1.2, 0.02, 0.002)
-FLOOR_SOLREF = (0.004, 1.0)
-FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 
 
 @dataclass
@@ -83,7 +82,7 @@ def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, e
 
 def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
     if mode not in MODES:
-        raise ValueError(f"mode {mode!r}: use one of {MODES}")
+        raise ConfigError(f"mode {mode!r}: use one of {MODES}")
     where = str(legmap.source or legmap.name)
     m = mjcf.from_path(str(legmap.mjcf))
     m.option.timestep = physics_dt
@@ -97,23 +96,8 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
     free = pelvis.freejoint or next((j for j in pelvis.joint if j.type == "free"), None)
     if free is None:
         free = pelvis.add("freejoint", name="legcal_root")
-    m.worldbody.add("light", pos=[0, -1, 3], dir=[0, 0.3, -1], directional=True, diffuse=[0.7, 0.7, 0.7])
-    tex = m.asset.add("texture", name="legcal_grid", type="2d", builtin="checker", width=256, height=256,
-                      rgb1=[0.82, 0.84, 0.86], rgb2=[0.72, 0.74, 0.78])
-    mat = m.asset.add("material", name="legcal_floor", texture=tex, texrepeat=[8, 8], texuniform=True)
-    collide = 1 if mode == "contact" else 0
-    m.worldbody.add("geom", name="legcal_floor", type="plane", size=[5, 5, 0.1], material=mat,
-                    contype=collide, conaffinity=collide, friction=list(FLOOR_FRICTION), condim=6,
-                    solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
-    if mode == "contact":
-        # Soft friction lets loaded soles creep by millimetres; an elliptic cone with a
-        # high impedance ratio and a no-slip pass make static friction behave as static.
-        m.option.cone = "elliptic"
-        m.option.impratio = 10
-        m.option.noslip_iterations = 5
-    else:
-        # Only the floor's contacts matter here: in kinematic and weld modes, none at all.
-        m.option.flag.contact = "disable"
+    # Only the floor's contacts matter here: in kinematic and weld modes, none at all.
+    add_floor(m, contact=mode == "contact")
 
     sole_site, corner_sites = {}, {}
     for side in SIDES:

@@ -1,0 +1,114 @@
+"""The calibrator interface, its result type and the registry (`legcal_bench.calibrators.base`).
+
+A calibrator gets the nominal robot (its leg map) and the recordings' observable part
+(never the ground truth) and returns a `CalibrationResult`. Calibrators are found
+through the package entry-point group `legcal_bench.calibrators`: legcal-bench's own
+register there exactly as a third-party package does, so a researcher adds a method
+with one class and one line in their pyproject:
+
+    [project.entry-points."legcal_bench.calibrators"]
+    my_method = "my_package.module:MyCalibrator"
+"""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from dataclasses import asdict, dataclass, field
+from importlib.metadata import entry_points
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from legcal_bench.data.recording import Recording
+from legcal_bench.errors import CalibrationError
+from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.robots.legmap import LegMap
+
+ENTRY_POINT_GROUP = "legcal_bench.calibrators"
+RESULT_FORMAT = "legcal-calibration-result"
+
+
+@dataclass
+class CalibrationResult:
+    calibrator: str
+    robot: str
+    offsets_rad: dict[str, float]  # joint name -> dq, in the convention q = q_enc + dq
+    pitch_sums_rad: dict[str, float] = field(default_factory=dict)  # left, right, right_minus_left
+    conditioning: dict[str, Any] = field(default_factory=dict)
+    diagnostics: dict[str, Any] = field(default_factory=dict)
+    timing_s: dict[str, float] = field(default_factory=dict)
+    settings: dict[str, Any] = field(default_factory=dict)
+    warnings: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return {"format": RESULT_FORMAT, "version": 1, **asdict(self)}
+
+    def save(self, path: str | Path) -> Path:
+        return atomic_write_json(path, self.to_dict())
+
+    @classmethod
+    def load(cls, path: str | Path) -> "CalibrationResult":
+        path = Path(path)
+        try:
+            d = json.loads(path.read_text())
+        except (OSError, json.JSONDecodeError) as e:
+            raise CalibrationError(f"{path}: not a readable result JSON ({e})") from None
+        if d.get("format") != RESULT_FORMAT:
+            raise CalibrationError(f"{path}: field 'format' must be {RESULT_FORMAT!r}")
+        d.pop("format"), d.pop("version", None)
+        missing = [k for k in ("calibrator", "robot", "offsets_rad") if k not in d]
+        if missing:
+            raise CalibrationError(f"{path}: missing fields {missing}")
+        return cls(**d)
+
+    def offsets_vector(self, joint_names: list[str]) -> np.ndarray:
+        missing = [n for n in joint_names if n not in self.offsets_rad]
+        if missing:
+            raise CalibrationError(f"result has no offsets for {missing}")
+        return np.array([self.offsets_rad[n] for n in joint_names])
+
+
+class Calibrator(ABC):
+    """One calibration method. Subclasses set `name` and implement `calibrate`.
+
+    Options come as keyword arguments to the constructor (the CLI passes
+    `--option key=value`); `settings()` reports them in every result.
+    """
+
+    name: ClassVar[str] = ""
+
+    def __init__(self, **options: Any):
+        if options:
+            raise CalibrationError(f"calibrator {self.name!r} takes no options, got {sorted(options)}")
+
+    @abstractmethod
+    def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
+        ...
+
+    def settings(self) -> dict[str, Any]:
+        return {}
+
+
+def available_calibrators() -> dict[str, type[Calibrator]]:
+    """Every calibrator registered in the entry-point group, by name."""
+    found: dict[str, type[Calibrator]] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            cls = ep.load()
+        except ImportError as e:
+            raise CalibrationError(f"entry point {ep.name!r} ({ep.value}) cannot be imported: {e}; reinstall the "
+                                   "package that registers it (pip install -e .)") from None
+        if not (isinstance(cls, type) and issubclass(cls, Calibrator)):
+            raise CalibrationError(f"entry point {ep.name!r} ({ep.value}) is not a Calibrator subclass")
+        found[ep.name] = cls
+    return found
+
+
+def get_calibrator(name: str, **options: Any) -> Calibrator:
+    found = available_calibrators()
+    if name not in found:
+        raise CalibrationError(f"unknown calibrator {name!r}; registered: {sorted(found)} "
+                               f"(add yours under the entry-point group '{ENTRY_POINT_GROUP}')")
+    return found[name](**options)

@@ -1,0 +1,50 @@
+"""Benchmark suites, registered by name with tags (dm_control's suite registry).
+
+A suite names its robots, floor modes, number of seeds and any collection overrides.
+Robots are references as `legcal_bench.robots.resolve_robot` takes them; a robot whose
+model is missing on this machine (the G1 example outside a checkout with ../shared)
+is skipped by the planner with a message naming the path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from legcal_bench.errors import ConfigError
+
+G1_EXAMPLE = "examples/unitree_g1.legmap.yaml"
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    robots: tuple[str, ...]
+    modes: tuple[str, ...]
+    seeds: int
+    collect: dict = field(default_factory=dict)
+    tags: tuple[str, ...] = ()
+    description: str = ""
+
+
+SUITES: dict[str, Suite] = {
+    s.name: s
+    for s in (
+        Suite("smoke", ("a2", "a3"), ("weld",), 1, dict(stance_s=6.0, heldout_s=4.0, standing_s=2.0, heldout=2),
+              ("fast", "static"), "A2-like and A3-like, weld floor, one seed, short sessions (~15 s)"),
+        Suite("standard", ("a2", "a3", "pair_ryp", "pair_pry"), ("weld",), 10, {},
+              ("static", "leaderboard"), "the built-in robots, weld floor, 10 seeds (~8 min on 2 cores)"),
+        Suite("full", ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE), ("kinematic", "weld", "contact"), 10, {},
+              ("static", "leaderboard", "external_robot", "all_floors"),
+              "adds the Unitree G1 through its leg map and the kinematic and contact floors (~30 min)"),
+    )
+}
+
+
+def get_suite(name: str) -> Suite:
+    if name not in SUITES:
+        raise ConfigError(f"--suite {name!r}: use one of {list(SUITES)}")
+    return SUITES[name]
+
+
+def suites_with_tag(tag: str) -> list[str]:
+    return [name for name, s in SUITES.items() if tag in s.tags]

@@ -1,0 +1,84 @@
+"""The work a benchmark process does: collect a session set, or calibrate and score a
+cell. Both are top-level functions of picklable arguments, so local processes and Dask
+workers run them alike; both are idempotent and write atomically."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from legcal_bench.benchmark.plan import Cell, Dataset
+from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.data.recording import MANIFEST, list_segments, load_session, load_truth
+from legcal_bench.errors import LegcalError
+from legcal_bench.evaluation.metrics import rms
+from legcal_bench.evaluation.scoring import score
+from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.protocol.collect import collect
+from legcal_bench.provenance import code_version
+from legcal_bench.robots import load_robot
+from legcal_bench.sim.offsets import paper_injection
+
+HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+def single_thread() -> None:
+    """Small problems on these machines run faster on one BLAS thread per process (for
+    libraries that read these later; the runner sets them before workers start)."""
+    for k in THREAD_VARIABLES:
+        os.environ.setdefault(k, "1")
+
+
+def collect_dataset(ds: Dataset, data_dir: str) -> str:
+    """Collect one session set (kept if its manifest exists); returns its directory."""
+    single_thread()
+    out = Path(data_dir) / ds.name
+    if not (out / MANIFEST).is_file():
+        collect(ds.config(), out, progress=False)
+    return str(out)
+
+
+def run_cell(cell: Cell, data_dir: str, results_dir: str) -> dict:
+    """Calibrate both session sets of a cell, score, write the cell's JSON (with its
+    resume key and the code version that made it)."""
+    single_thread()
+    legmap = load_robot(cell.robot)
+    out: dict = {"cell": asdict(cell), "robot": legmap.name, "joint_names": legmap.joint_names,
+                 "key": cell.key(), "provenance": code_version()}
+    try:
+        _calibrate_and_score(cell, legmap, data_dir, out)
+    except LegcalError as e:
+        # A method that cannot calibrate this data is a result too, not a crash.
+        out["error"] = str(e)
+    atomic_write_json(cell.path(Path(results_dir)), out)
+    return out
+
+
+def _calibrate_and_score(cell: Cell, legmap, data_dir: str, out: dict) -> None:
+    names = legmap.joint_names
+    est = {}
+    for inj in ("native", "injected"):
+        bags = Path(data_dir) / cell.dataset(inj).name
+        recs = load_session(bags, names)
+        res = get_calibrator(cell.calibrator, **dict(cell.options)).calibrate(legmap, recs)
+        est[inj] = res.offsets_vector(names)
+        s = score(str(bags), res, legmap)
+        residuals = s.get("heldout", {}).pop("foot_height_residuals_mm", None)
+        out[inj] = {"score": s, "timing_s": res.timing_s, "warnings": res.warnings,
+                    "conditioning": {k: v for k, v in res.conditioning.items()
+                                     if k.startswith("kappa") or k.startswith("eigenvalues")},
+                    "offsets_rad": res.offsets_rad}
+        if inj == "native" and residuals:
+            # Held-out foot heights as counts on fixed bins (for the pooled histograms).
+            out[inj]["heldout_foot_height_hist"] = {
+                "edges_mm": [float(HIST_EDGES_MM[0]), float(HIST_EDGES_MM[-1]), len(HIST_EDGES_MM) - 1],
+                **{k: np.histogram(np.clip(v, HIST_EDGES_MM[0], HIST_EDGES_MM[-1]), HIST_EDGES_MM)[0].tolist()
+                   for k, v in residuals.items()}}
+        out[inj]["truth_offsets_rad"] = load_truth(list_segments(bags)[0]).offsets.tolist()
+    delta = est["injected"] - est["native"] - cell.scale * paper_injection(legmap)
+    out["paired_delta_deg"] = {n: float(np.rad2deg(v)) for n, v in zip(names, delta)}
+    out["paired_delta_rms_deg"] = float(np.rad2deg(rms(delta)))

@@ -1,0 +1,121 @@
+"""`legcal-bench calibrate` and `score`."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from legcal_bench.cli.robots import robot_args
+from legcal_bench.errors import ConfigError
+
+
+def parse_options(pairs: list[str]) -> dict:
+    """`--option key=value` pairs; values are read as JSON when they parse (numbers,
+    true/false, lists), else kept as strings."""
+    out = {}
+    for pair in pairs or []:
+        if "=" not in pair:
+            raise ConfigError(f"--option {pair!r}: write key=value, e.g. --option lambda_q=0.1")
+        k, v = pair.split("=", 1)
+        try:
+            out[k] = json.loads(v)
+        except json.JSONDecodeError:
+            out[k] = v
+    return out
+
+
+def cmd_calibrate(a: argparse.Namespace) -> int:
+    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.robots import load_robot, resolve_robot
+
+    options = parse_options(a.option)
+    if a.setting is not None:
+        options["setting"] = a.setting
+    if a.solver is not None:
+        options["solver"] = a.solver
+    calibrator = get_calibrator(a.calibrator, **options)  # a bad name or option fails before any data is read
+    legmap = load_robot(a.robot, a.mjcf)
+    recordings = load_session(a.bags, legmap.joint_names)
+    result = calibrator.calibrate(legmap, recordings)
+    result.settings["robot_spec"] = resolve_robot(a.robot)
+    result.save(a.out)
+    if a.plots and result.conditioning.get("eigenvalues_H_reg"):
+        from legcal_bench.estimation.observability import plot_observability
+
+        plot_observability(result.conditioning, legmap.joint_names, Path(a.plots) / "observability.png",
+                           title=f"{legmap.name} {result.calibrator}")
+    print(format_result(result, legmap.joint_names))
+    print(f"wrote {a.out}")
+    return 0
+
+
+def format_result(result, names: list[str]) -> str:
+    c = result.conditioning
+    lines = [f"{result.calibrator} on {result.robot}: offsets (deg)"]
+    for n in names:
+        lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}")
+    if result.pitch_sums_rad:
+        ps = result.pitch_sums_rad
+        lines.append("pitch sums (deg): " + ", ".join(f"{k} {np.rad2deg(v):+.4f}" for k, v in ps.items()))
+    kappas = [(label, c[key]) for label, key in (("kappa(J_data)", "kappa_J_data"), ("kappa(H_data)", "kappa_H_data"),
+                                                 ("kappa(H_reg)", "kappa_H_reg")) if key in c]
+    if kappas:
+        lines.append("conditioning: " + ", ".join(f"{label} {v:.4g}" for label, v in kappas))
+    lines.append("time (s): " + ", ".join(f"{k} {v:.3f}" for k, v in result.timing_s.items()))
+    lines += [f"WARNING: {w}" for w in result.warnings]
+    return "\n".join(lines)
+
+
+def cmd_score(a: argparse.Namespace) -> int:
+    from legcal_bench.calibrators.base import CalibrationResult
+    from legcal_bench.evaluation.scoring import score
+    from legcal_bench.robots import load_robot
+
+    result = CalibrationResult.load(a.result)
+    legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot))
+    s = score(a.bags, result, legmap)
+    if not a.residuals:
+        s.get("heldout", {}).pop("foot_height_residuals_mm", None)
+    if a.json:
+        print(json.dumps(s, indent=2))
+        return 0
+    if "recovery" in s:
+        r = s["recovery"]
+        print(f"recovery: RMS {r['rms_error_deg']:.4g} deg, max {r['max_error_deg']:.4g} deg; pitch-sum errors (deg) "
+              + ", ".join(f"{k} {v:+.4g}" for k, v in r["pitch_sum_error_deg"].items()))
+    if "heldout" in s:
+        h = s["heldout"]
+        print(f"held-out ({h['frames']} frames): foot height RMS {h['foot_height_rms_mm']['before']:.3f} -> "
+              f"{h['foot_height_rms_mm']['after']:.3f} mm, sole normal RMS {h['sole_normal_rms_deg']['before']:.3f} -> "
+              f"{h['sole_normal_rms_deg']['after']:.3f} deg")
+        if "foot_height_rms_true_mm" in h:
+            t = h["foot_height_rms_true_mm"]
+            print(f"  on the true held-out postures (noise-free): foot height RMS {t['before']:.4f} -> {t['after']:.4f} mm")
+    return 0
+
+
+def add_commands(sub) -> None:
+    k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
+    robot_args(k)
+    k.add_argument("--bags", required=True, help="directory of recordings (legcal-bench collect --out, or your own)")
+    k.add_argument("--calibrator", default="interfoot", help="registered calibrator name (default interfoot)")
+    k.add_argument("--setting", default=None, help="interfoot: operating (default), matched, sensor, a3_operating, "
+                                                   "a2_operating")
+    k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
+    k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="any calibrator option, e.g. --option lambda_q=0.1 (repeatable)")
+    k.add_argument("--out", default="result.json", help="result JSON (default result.json)")
+    k.add_argument("--plots", default=None, help="directory for the observability plot")
+    k.set_defaults(func=cmd_calibrate)
+
+    sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings")
+    sc.add_argument("--bags", required=True)
+    sc.add_argument("--result", required=True)
+    sc.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
+    sc.add_argument("--json", action="store_true")
+    sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
+    sc.set_defaults(func=cmd_score)

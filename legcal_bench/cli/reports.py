@@ -1,0 +1,84 @@
+"""`legcal-bench reproduce`, `bench-speed`, `bench-env` and `regression`: reports on
+legcal-bench itself."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+DEFAULT_FIXTURE = Path("tests/fixtures/regression.json")
+
+
+def cmd_reproduce(a: argparse.Namespace) -> int:
+    from legcal_bench.reports.reproduce import reproduce
+
+    print(reproduce(a.out, progress=not a.quiet))
+    return 0
+
+
+def cmd_bench_speed(a: argparse.Namespace) -> int:
+    from legcal_bench.reports.bench_speed import run_bench_speed
+
+    print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, progress=not a.quiet))
+    return 0
+
+
+def cmd_bench_env(a: argparse.Namespace) -> int:
+    from legcal_bench.reports.bench_env import run_bench_env
+
+    print(run_bench_env(a.robots, a.modes, a.out, seed=a.seed, progress=not a.quiet))
+    return 0
+
+
+def cmd_regression(a: argparse.Namespace) -> int:
+    import tempfile
+
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.reports import regression
+
+    if a.update:
+        regression.update(a.fixture, workers=a.workers, progress=not a.quiet)
+        print(f"wrote {a.fixture}: the numbers of the code at hand are now the reference")
+        return 0
+    if not Path(a.fixture).is_file():
+        raise ConfigError(f"--fixture {a.fixture}: no such file (run from a checkout, or give its path)")
+    with tempfile.TemporaryDirectory() as tmp:
+        problems = regression.compare(regression.load_fixture(a.fixture),
+                                      regression.compute(Path(tmp), workers=a.workers, progress=not a.quiet))
+    for p in problems:
+        print(p)
+    print(f"{len(problems)} value(s) moved beyond 1e-7 relative / 1e-9 deg absolute" if problems
+          else "every fixture value reproduced")
+    return 1 if problems else 0
+
+
+def add_commands(sub) -> None:
+    from legcal_bench.benchmark.suites import G1_EXAMPLE
+
+    rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)")
+    rp.add_argument("--out", default="reports/reproduction")
+    rp.add_argument("--quiet", action="store_true")
+    rp.set_defaults(func=cmd_reproduce)
+
+    bs = sub.add_parser("bench-speed", help="time the calibrators (analytic vs forward-difference Jacobians)")
+    bs.add_argument("--robot", default="a3")
+    bs.add_argument("--repeats", type=int, default=5)
+    bs.add_argument("--out", default="reports/bench_speed")
+    bs.add_argument("--quiet", action="store_true")
+    bs.set_defaults(func=cmd_bench_speed)
+
+    b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
+    b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE])
+    b.add_argument("--modes", nargs="+", default=["kinematic", "weld", "contact"])
+    b.add_argument("--seed", type=int, default=0)
+    b.add_argument("--out", default="reports/bench_env", help="report directory (markdown + JSON)")
+    b.add_argument("--quiet", action="store_true")
+    b.set_defaults(func=cmd_bench_env)
+
+    rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
+    rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")
+    rg.add_argument("--update", action="store_true",
+                    help="write the fixture from the code at hand (only when numbers are meant to move)")
+    rg.add_argument("--workers", type=int, default=2)
+    rg.add_argument("--quiet", action="store_true")
+    rg.set_defaults(func=cmd_regression)

@@ -1,0 +1,89 @@
+"""`legcal-bench info` and `render`: the robots."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+
+def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
+    p.add_argument("--robot", default=default,
+                   help="built-in robot name (a2, a3, pair_ryp, pair_pry) or the path of a leg-map YAML "
+                        f"(default: {default})")
+    p.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names")
+
+
+def cmd_info(a: argparse.Namespace) -> int:
+    from legcal_bench.robots import BUILTIN, load_robot
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    if a.robot is None:
+        print("built-in robots (or pass --robot path/to/robot.legmap.yaml):")
+        for e in BUILTIN.values():
+            print(f"  {e.name:<10} {e.description}  [{', '.join(e.tags)}]")
+        return 0
+    legmap = load_robot(a.robot, a.mjcf)
+    kin = LegKinematics(legmap)
+    info = {
+        "name": legmap.name, "mjcf": str(legmap.mjcf),
+        "hip_order": "->".join(r.replace("hip_", "") for r in legmap.hip_order),
+        "dims_m": asdict(kin.dims), "knee_straight_deg": float(np.rad2deg(legmap.knee_straight_rad)),
+        "held_joints_deg": {k: float(np.rad2deg(v)) for k, v in legmap.held_joints_rad.items()},
+        "joints": [],
+    }
+    axes = kin.joint_axes()
+    for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
+        info["joints"].append({
+            "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axes[i], 6).tolist(),
+            "limits_deg": np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist()})
+    if a.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    print(f"{info['name']}: {info['mjcf']}")
+    print(f"  hip order {info['hip_order']}; leg length {kin.dims.leg_length:.3f} m, "
+          f"feet at y = ±{kin.dims.foot_y:.3f} m; sole {kin.dims.sole_length:.3f} x {kin.dims.sole_width:.3f} m")
+    print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} limits (deg)")
+    for j in info["joints"]:
+        ax = " ".join(f"{v:+.3f}" for v in j["axis_in_pelvis_at_zero"])
+        print(f"  {j['index']:>2} {j['name']:<28} {j['role']:<12} {ax:<26} "
+              f"{j['limits_deg'][0]:+.1f} .. {j['limits_deg'][1]:+.1f}")
+    if info["held_joints_deg"]:
+        print("  held joints (deg): " + ", ".join(f"{k} {v:+.2f}" for k, v in info["held_joints_deg"].items()))
+    return 0
+
+
+def cmd_render(a: argparse.Namespace) -> int:
+    from PIL import Image
+
+    from legcal_bench.envs.static_double_support import StaticDoubleSupportEnv
+    from legcal_bench.files.atomic import atomic_write
+
+    env = StaticDoubleSupportEnv(robot=a.robot, mjcf=a.mjcf, mode=a.mode, offsets="none", sensors="zero",
+                                 render_mode="rgb_array")
+    _, info = env.reset(seed=a.seed, options={"stance": a.stance})
+    env.step(info["posture"])
+    img = env.render()
+    env.close()
+    out = Path(a.out)
+    atomic_write(out, lambda f: Image.fromarray(img).save(f, format="PNG"), mode="wb")
+    print(f"wrote {out} ({img.shape[1]}x{img.shape[0]}, {env.legmap.name}, stance {a.stance}, {a.mode})")
+    return 0
+
+
+def add_commands(sub) -> None:
+    i = sub.add_parser("info", help="list robots, or show one robot's joint order, axes and limits")
+    robot_args(i, default=None)
+    i.add_argument("--json", action="store_true")
+    i.set_defaults(func=cmd_info)
+
+    r = sub.add_parser("render", help="PNG of a robot in a stance (offscreen)")
+    robot_args(r)
+    r.add_argument("--stance", default="I", help="I, II, III, IV or standing (default I)")
+    r.add_argument("--mode", default="kinematic", choices=("kinematic", "weld", "contact"))
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument("--out", default="robot.png")
+    r.set_defaults(func=cmd_render)

@@ -1,0 +1,232 @@
+"""Recordings: the on-disk format shared by simulation and real robots.
+
+One `.npz` file per segment (a stance, the straight-leg standing phase, or a held-out
+session) holds what a real robot logs; the simulator's ground truth for that segment,
+which calibrators never receive, sits beside it in `<name>.truth.npz`. A directory of
+segments (a "session set") has a `session.json` manifest. The schema is in
+docs/recording-format.md; `load_recording` validates everything it reads.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from legcal_bench.errors import LegcalError, RecordingError
+from legcal_bench.files.atomic import atomic_write, atomic_write_json
+from legcal_bench.sim.sensors import SensorModel
+
+FORMAT = "legcal-recording"
+VERSION = 1
+KINDS = ("standing", "stance", "heldout")
+MANIFEST = "session.json"
+
+
+@dataclass
+class Recording:
+    """The observable part of one segment: what a real robot logs."""
+
+    name: str
+    kind: str  # standing | stance | heldout
+    stance: str  # I, II, III, IV, standing, or a free label for real logs
+    robot: str
+    joint_names: list[str]
+    time: np.ndarray  # (N,) s, strictly increasing
+    q_enc: np.ndarray  # (N, 12) rad, encoder angles in joint_names order
+    imu_acc: np.ndarray  # (N, 3) m/s^2, specific force in the IMU frame
+    imu_gyro: np.ndarray  # (N, 3) rad/s, angular rate in the IMU frame
+    sensor_model: SensorModel = field(default_factory=SensorModel)
+    ft: np.ndarray | None = None  # (N, 2, 6) ankle [force, torque], left then right
+    source: str = "robot"  # "robot", or "sim:<mode>" for simulated data
+    session: str = ""
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.time.shape[0])
+
+    @property
+    def rate_hz(self) -> float:
+        return float((self.n_frames - 1) / (self.time[-1] - self.time[0])) if self.n_frames > 1 else 0.0
+
+    def meta(self) -> dict:
+        return {
+            "format": FORMAT, "version": VERSION, "name": self.name, "kind": self.kind,
+            "stance": self.stance, "robot": self.robot, "joint_names": list(self.joint_names),
+            "sensor_model": self.sensor_model.to_dict(), "source": self.source, "session": self.session,
+        }
+
+    def save(self, path: str | Path) -> Path:
+        arrays = {"time": self.time, "q_enc": self.q_enc, "imu_acc": self.imu_acc, "imu_gyro": self.imu_gyro}
+        if self.ft is not None:
+            arrays["ft"] = self.ft
+        validate(arrays, self.meta(), str(path))
+        return _save_npz(path, arrays, self.meta())
+
+
+@dataclass
+class Truth:
+    """The simulator's ground truth for one segment (never given to calibrators)."""
+
+    q_true: np.ndarray  # (N, 12)
+    offsets: np.ndarray  # (12,) injected, q_enc = q_true - offsets (+ noise)
+    sole_poses_world: np.ndarray  # (N, 2, 7) [x y z qw qx qy qz], left then right
+    pelvis_pose_world: np.ndarray  # (N, 7)
+    posture: np.ndarray  # (N, 6) commanded pelvis posture actually applied
+    posture_reachable: np.ndarray  # (N,) bool
+    imu_true_acc: np.ndarray  # (N, 3)
+    imu_true_gyro: np.ndarray  # (N, 3)
+    meta: dict = field(default_factory=dict)
+
+    def save(self, path: str | Path) -> Path:
+        arrays = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "meta"}
+        return _save_npz(path, arrays, {"format": FORMAT + "-truth", "version": VERSION, **self.meta})
+
+
+def _save_npz(path: str | Path, arrays: dict, meta: dict) -> Path:
+    buf = io.BytesIO()
+    np.savez_compressed(buf, meta=np.array(json.dumps(meta, sort_keys=True)),
+                        **{k: np.asarray(v) for k, v in arrays.items()})
+    return atomic_write(path, lambda f: f.write(buf.getvalue()), mode="wb")
+
+
+def truth_path(path: str | Path) -> Path:
+    path = Path(path)
+    return path.with_name(path.stem + ".truth.npz")
+
+
+# -------------------------------------------------------------------- validation
+_SHAPES = {"time": (None,), "q_enc": (None, 12), "imu_acc": (None, 3), "imu_gyro": (None, 3), "ft": (None, 2, 6)}
+_META_KEYS = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model")
+
+
+def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None = None) -> None:
+    for key in _META_KEYS:
+        if key not in meta:
+            raise RecordingError(f"{where}: missing metadata field '{key}' (see docs/recording-format.md)")
+    if meta["format"] != FORMAT:
+        raise RecordingError(f"{where}: field 'format' is {meta['format']!r}, expected {FORMAT!r}")
+    if meta["version"] != VERSION:
+        raise RecordingError(f"{where}: format version {meta['version']} is not supported (this reader: {VERSION})")
+    if meta["kind"] not in KINDS:
+        raise RecordingError(f"{where}: field 'kind' is {meta['kind']!r}; use one of {KINDS}")
+    names = list(meta["joint_names"])
+    if len(names) != 12:
+        raise RecordingError(f"{where}: field 'joint_names' must list the 12 leg joints, got {len(names)}")
+    if joint_names is not None and names != list(joint_names):
+        missing = [n for n in joint_names if n not in names]
+        extra = [n for n in names if n not in joint_names]
+        hint = (f"missing {missing}, unexpected {extra}" if missing or extra
+                else "same names in another order: reorder the q_enc columns to the leg map's order")
+        raise RecordingError(f"{where}: joint_names do not match the robot's leg joints ({hint})")
+    for key in ("time", "q_enc", "imu_acc", "imu_gyro"):
+        if key not in arrays:
+            raise RecordingError(f"{where}: missing field '{key}' (see docs/recording-format.md)")
+    n = None
+    for key, shape in _SHAPES.items():
+        if key not in arrays:
+            continue
+        a = np.asarray(arrays[key])
+        if a.dtype.kind not in "fi":
+            raise RecordingError(f"{where}: field '{key}' must be numeric, got dtype {a.dtype}")
+        if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
+            want = "(N, " + ", ".join(str(s) for s in shape[1:]) + ")" if len(shape) > 1 else "(N,)"
+            raise RecordingError(f"{where}: field '{key}' has shape {a.shape}, expected {want}")
+        if n is None:
+            n = a.shape[0]
+        elif a.shape[0] != n:
+            raise RecordingError(f"{where}: field '{key}' has {a.shape[0]} frames but 'time' has {n}")
+        bad = ~np.isfinite(a)
+        if bad.any():
+            frames = np.unique(np.nonzero(bad)[0])
+            raise RecordingError(f"{where}: field '{key}' has NaN/inf in {frames.size} frame(s), first at frame "
+                                 f"{frames[0]}; drop those frames (or interpolate) before saving")
+    if n == 0:
+        raise RecordingError(f"{where}: the recording has no frames")
+    t = np.asarray(arrays["time"], dtype=float)
+    dt = np.diff(t)
+    if (dt <= 0).any():
+        k = int(np.flatnonzero(dt <= 0)[0])
+        raise RecordingError(f"{where}: field 'time' is not strictly increasing (frame {k + 1}: {t[k + 1]} after "
+                             f"{t[k]}); sort the frames by time and drop duplicates")
+    q = np.asarray(arrays["q_enc"], dtype=float)
+    if np.abs(q).max() > 2 * np.pi:
+        raise RecordingError(f"{where}: field 'q_enc' has |angle| up to {np.abs(q).max():.1f}, which looks like "
+                             "degrees; encoder angles must be radians (np.deg2rad)")
+    acc_norm = np.linalg.norm(np.asarray(arrays["imu_acc"], dtype=float), axis=1).mean()
+    if not 3.0 < acc_norm < 30.0:
+        raise RecordingError(f"{where}: field 'imu_acc' has mean norm {acc_norm:.3g}; expected specific force in "
+                             "m/s^2 (about 9.81 at rest). Convert from g (x 9.81) if needed")
+
+
+def _read_npz(path: Path) -> tuple[dict, dict]:
+    if not path.is_file():
+        raise RecordingError(f"{path}: no such recording")
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in z.files}
+    except Exception as e:  # noqa: BLE001 - numpy raises many types for bad files
+        raise RecordingError(f"{path}: not a readable .npz file ({e})") from None
+    if "meta" not in arrays:
+        raise RecordingError(f"{path}: missing field 'meta' (the JSON header; see docs/recording-format.md)")
+    try:
+        meta = json.loads(str(arrays.pop("meta")))
+    except json.JSONDecodeError as e:
+        raise RecordingError(f"{path}: field 'meta' is not valid JSON ({e})") from None
+    return arrays, meta
+
+
+def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Recording:
+    """Read and validate one recording (never its ground truth)."""
+    path = Path(path)
+    arrays, meta = _read_npz(path)
+    validate(arrays, meta, str(path), joint_names)
+    try:
+        sensor = SensorModel.from_dict(meta["sensor_model"])
+    except (TypeError, ValueError, LegcalError) as e:
+        raise RecordingError(f"{path}: field 'sensor_model' is invalid ({e})") from None
+    return Recording(
+        name=meta["name"], kind=meta["kind"], stance=meta["stance"], robot=meta["robot"],
+        joint_names=list(meta["joint_names"]),
+        time=arrays["time"].astype(float), q_enc=arrays["q_enc"].astype(float),
+        imu_acc=arrays["imu_acc"].astype(float), imu_gyro=arrays["imu_gyro"].astype(float),
+        sensor_model=sensor, ft=arrays["ft"].astype(float) if "ft" in arrays else None,
+        source=meta.get("source", "robot"), session=meta.get("session", ""),
+    )
+
+
+def load_truth(path: str | Path) -> Truth:
+    """The simulator's ground truth for the recording at `path` (scoring only)."""
+    tp = truth_path(path)
+    arrays, meta = _read_npz(tp)
+    fields_ = [k for k in Truth.__dataclass_fields__ if k != "meta"]
+    missing = [k for k in fields_ if k not in arrays]
+    if missing:
+        raise RecordingError(f"{tp}: missing ground-truth fields {missing}")
+    return Truth(**{k: arrays[k] for k in fields_}, meta=meta)
+
+
+def write_manifest(out_dir: str | Path, manifest: dict) -> Path:
+    return atomic_write_json(Path(out_dir) / MANIFEST, {"format": FORMAT + "-session", "version": VERSION, **manifest})
+
+
+def list_segments(directory: str | Path) -> list[Path]:
+    """Recording files in a directory (manifest order when there is one)."""
+    directory = Path(directory)
+    if not directory.is_dir():
+        raise RecordingError(f"{directory}: not a directory of recordings")
+    man = directory / MANIFEST
+    if man.is_file():
+        files = json.loads(man.read_text()).get("files", [])
+        return [directory / f for f in files]
+    paths = sorted(p for p in directory.glob("*.npz") if not p.name.endswith(".truth.npz"))
+    if not paths:
+        raise RecordingError(f"{directory}: no recordings (*.npz) found")
+    return paths
+
+
+def load_session(directory: str | Path, joint_names: list[str] | None = None) -> list[Recording]:
+    return [load_recording(p, joint_names) for p in list_segments(directory)]

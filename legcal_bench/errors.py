@@ -1,0 +1,46 @@
+"""The one error family of legcal-bench.
+
+Every error a user can cause (a bad leg map, recording, option, robot or request)
+is a `LegcalError`; its message names the field and the fix. The CLI turns these,
+and only these, into exit code 2 with the message. Anything else is a bug in
+legcal-bench (or a library under it) and propagates with its traceback.
+"""
+
+from __future__ import annotations
+
+
+class LegcalError(Exception):
+    """Base class: bad input, with a message naming the field and the fix."""
+
+
+class ConfigError(LegcalError):
+    """A bad argument or option: unknown suite, stance, mode, preset, option value."""
+
+
+class LegMapError(LegcalError):
+    """A leg map (or robot reference) that cannot be used."""
+
+
+class MissingModelError(LegMapError):
+    """The robot's MJCF file is not where its leg map says (e.g. an example robot
+    outside a checkout); suites skip such robots with this message."""
+
+
+class OffsetSpecError(LegcalError):
+    """An offsets specification that is not understood."""
+
+
+class SensorModelError(LegcalError):
+    """A sensor model (preset name or declared fields) that cannot be used."""
+
+
+class RecordingError(LegcalError):
+    """A recording that cannot be used; the message names the file, the field and the fix."""
+
+
+class IKError(LegcalError):
+    """The requested posture is out of reach (or beyond the joint limits)."""
+
+
+class CalibrationError(LegcalError):
+    """The data cannot determine a calibration; the message says why and what to record."""

@@ -1,0 +1,94 @@
+"""The paper's residuals and their analytic Jacobians w.r.t. the offsets dq.
+
+The kinematics they start from (C_k, its Jacobian G_k, sole poses and Jacobians) is
+`legcal_bench.robots.kinematics.frame_kinematics`; the IMU vertical is
+`legcal_bench.estimation.levelling`.
+
+For frame k of contact segment s, with corrected angles q_k = q_enc_k + dq:
+
+  inter-foot transform  C_k = T_BFL(q_k)^-1 T_BFR(q_k)
+  feet residual         r_k = Log(M_s^-1 C_k) in R^6 (translation, then rotation),
+                        M_s the segment's Frechet mean of the C_k
+  flat-ground residual  [p_Lz - p_Rz, z_Lx, z_Ly, z_Rx, z_Ry] in the IMU-levelled frame W
+                        (vertical = -gravity from the IMU, yaw arbitrary)
+
+Jacobians. A right perturbation of the sole poses, T_BF(q + d) = T_BF Exp(J_F d)
+with J_F the sole's local frame Jacobian, perturbs C_k on the right by
+G_k d = [-Ad(C_k^-1) J_L | J_R] d, so with E_k = M^-1 C_k:
+
+  fixed mean (the paper's inner solve):  dr_k = Jr_inv(E_k) G_k d
+  mean re-estimated (variable projection): M(dq) keeps sum_k r_k = 0, so
+      dr_k = A_k G_k d - B_k S^-1 sum_j A_j G_j d,   A = Jr_inv(E), B = Jl_inv(E), S = sum_j B_j
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pinocchio as pin
+
+from legcal_bench.geometry.lie import Jl_inv, Jr_inv, Log, inverse
+from legcal_bench.robots.kinematics import FrameKinematics
+
+# d(R e_z)/d(omega) in the rotated frame: omega x e_z = [w_y, -w_x, 0].
+_EZ_CROSS = np.array([[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+
+
+def foot_height_difference(fk: FrameKinematics, up_B: np.ndarray) -> np.ndarray:
+    """(N,) p_Lz - p_Rz along the IMU vertical: the flat-ground residual's first row (m)."""
+    return np.einsum("ni,ni->n", up_B, fk.p_L - fk.p_R)
+
+
+def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with_jacobian: bool = True):
+    """(N, 5) flat-ground residuals and (N, 5, 12) their Jacobians."""
+    n = len(up_B)
+    r = np.empty((n, 5))
+    r[:, 0] = foot_height_difference(fk, up_B)
+    zL = np.einsum("nij,nj->ni", R_WB, fk.R_L[:, :, 2])
+    zR = np.einsum("nij,nj->ni", R_WB, fk.R_R[:, :, 2])
+    r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]
+    if not with_jacobian:
+        return r, None
+    J = np.zeros((n, 5, 12))
+    # Height: u . (R_L v_L - R_R v_R), v the local linear velocity.
+    J[:, 0, :6] = np.einsum("ni,nij,njk->nk", up_B, fk.R_L, fk.J_L[:, :3])
+    J[:, 0, 6:] = -np.einsum("ni,nij,njk->nk", up_B, fk.R_R, fk.J_R[:, :3])
+    # Normals: d(R_WB R e_z) = R_WB R (omega x e_z).
+    J[:, 1:3, :6] = np.einsum("nij,njk,kl,nlm->nim", R_WB[:, :2], fk.R_L, _EZ_CROSS, fk.J_L[:, 3:])
+    J[:, 3:5, 6:] = np.einsum("nij,njk,kl,nlm->nim", R_WB[:, :2], fk.R_R, _EZ_CROSS, fk.J_R[:, 3:])
+    return r, J
+
+
+def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fixed"):
+    """(N, 6) residuals Log(M^-1 C_k) and (N, 6, 12) Jacobians.
+
+    mode "fixed": M held constant (the paper's inner solve); "projected": M = M(dq)
+    re-estimated with dq (variable projection; requires M to be the Frechet mean)."""
+    n = len(C)
+    E = inverse(M[None])[0] @ C
+    r = np.empty((n, 6))
+    A = np.empty((n, 6, 6))
+    B = np.empty((n, 6, 6)) if mode == "projected" else None
+    for k in range(n):
+        Ek = pin.SE3(E[k])
+        r[k] = Log(Ek)
+        A[k] = Jr_inv(Ek)
+        if B is not None:
+            B[k] = Jl_inv(Ek)
+    J = A @ G
+    if mode == "projected":
+        correction = np.linalg.solve(B.sum(axis=0), J.sum(axis=0))  # S^-1 sum_j A_j G_j
+        J -= B @ correction
+    return r, J
+
+
+def flat_ground_errors(fk: FrameKinematics, up_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame, the flat-ground residual read as errors: the foot-height difference
+    along the vertical (m, the residual's first row) and the angle of each sole normal
+    to the vertical (rad, (N, 2)): atan2(|z x u|, z . u), which keeps its precision near
+    zero where arccos loses half the digits."""
+    h = foot_height_difference(fk, up_B)
+    ang = np.empty((len(up_B), 2))
+    for j, R in enumerate((fk.R_L, fk.R_R)):
+        z = R[:, :, 2]
+        ang[:, j] = np.arctan2(np.linalg.norm(np.cross(z, up_B), axis=1), np.einsum("ni,ni->n", z, up_B))
+    return h, ang

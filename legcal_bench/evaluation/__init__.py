@@ -1,0 +1,1 @@
+"""Scores against the simulator's ground truth (recovery, held-out foot height)."""

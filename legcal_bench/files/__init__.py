@@ -1,0 +1,1 @@
+"""Writing files: atomic writes, figures, and markdown + JSON reports."""

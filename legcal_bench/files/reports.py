@@ -1,0 +1,16 @@
+"""A report is a markdown page and the JSON it was made from, side by side."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from legcal_bench.files.atomic import atomic_write_json, atomic_write_text
+
+
+def write_report(out: str | Path, markdown: str, data: Any, name: str = "report") -> str:
+    """Write `<out>/<name>.md` and `<out>/<name>.json` atomically; returns the markdown."""
+    out = Path(out)
+    atomic_write_json(out / f"{name}.json", data)
+    atomic_write_text(out / f"{name}.md", markdown)
+    return markdown

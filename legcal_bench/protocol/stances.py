@@ -1,0 +1,137 @@
+"""The stance protocol: the paper's four stances, foot placements and posture motion.
+
+A stance fixes both soles on the floor; within it the pelvis moves continuously
+(squat depth, fore-aft and lateral sway, roll, pitch and yaw), which excites every
+leg joint including hip roll and hip yaw. Everything scales with the robot's own
+dimensions (`RobotDims`), so the same protocol fits any robot.
+
+Frames: the stance frame S has its origin on the floor midway between the nominal
+sole centres, x forward, z up; it is the world frame of a recording. A posture is the
+pelvis pose in S as [x, y, z, roll, pitch, yaw] (m, rad; fixed-axis roll-pitch-yaw).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import ConvexHull
+
+from legcal_bench.errors import IKError
+from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
+from legcal_bench.robots.kinematics import LegKinematics, RobotDims
+
+
+@dataclass(frozen=True)
+class Stance:
+    name: str
+    label: str
+    left_x: float = 0.0  # fore-aft sole position, in leg lengths
+    right_x: float = 0.0
+    extra_width: float = 0.0  # added to each sole's lateral position, in leg lengths
+    toe_out: float = 0.0  # sole yaw, rad (left +, right -)
+    depth: float = 0.08  # squat depth below straight legs, in leg lengths
+    # Sinusoid amplitudes of the posture components (x, y in leg lengths; z in leg
+    # lengths; roll, pitch, yaw in rad).
+    amplitude: tuple[float, float, float, float, float, float] = (0.02, 0.03, 0.03, 0.05, 0.08, 0.10)
+
+
+STANCES: dict[str, Stance] = {
+    s.name: s
+    for s in (
+        Stance("I", "normal squat"),
+        # Lunges sway less sideways: their support polygon is a skewed parallelogram,
+        # and a strained chain (offsets) rolls narrow feet onto their edges.
+        Stance("II", "left lunge", left_x=0.12, right_x=-0.10, depth=0.10,
+               amplitude=(0.015, 0.012, 0.025, 0.025, 0.06, 0.06)),
+        Stance("III", "right lunge", left_x=-0.10, right_x=0.12, depth=0.10,
+               amplitude=(0.015, 0.012, 0.025, 0.025, 0.06, 0.06)),
+        Stance("IV", "wide squat", extra_width=0.10, toe_out=0.15, depth=0.12,
+               amplitude=(0.015, 0.03, 0.025, 0.04, 0.06, 0.08)),
+    )
+}
+STANDING = Stance("standing", "straight-leg standing", depth=0.0, amplitude=(0.0,) * 6)
+ALL_STANCES = {**STANCES, "standing": STANDING}
+
+# Incommensurate periods (s) so no posture repeats within a stance.
+PERIODS = (11.0, 9.0, 7.0, 5.5, 8.5, 6.5)
+
+
+def posture_bounds(dims: RobotDims) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of a commanded posture: +-0.25 leg lengths in x and y, 0.6-1.0 leg
+    lengths in z, +-0.4 rad in roll, pitch and yaw."""
+    L = dims.leg_length
+    return (np.array([-0.25 * L, -0.25 * L, 0.6 * L, -0.4, -0.4, -0.4]),
+            np.array([0.25 * L, 0.25 * L, 1.0 * L, 0.4, 0.4, 0.4]))
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where the soles are (in the stance/world frame) and the nominal pelvis posture."""
+
+    stance: Stance
+    left: pin.SE3
+    right: pin.SE3
+    nominal: np.ndarray  # posture [x, y, z, roll, pitch, yaw]
+
+
+def place(stance: Stance, dims: RobotDims, rng: np.random.Generator | None = None,
+          jitter_m: float = 0.0, jitter_rad: float = 0.0) -> Placement:
+    """Sole poses for `stance`, each perturbed uniformly by up to the jitter."""
+    L = dims.leg_length
+    y = dims.foot_y + stance.extra_width * L
+    feet = []
+    for sx, sy, yaw in ((stance.left_x, y, stance.toe_out), (stance.right_x, -y, -stance.toe_out)):
+        d = np.zeros(3) if rng is None else rng.uniform(-1, 1, 3) * [jitter_m, jitter_m, jitter_rad]
+        feet.append(pose_xyz_rpy([sx * L + d[0], sy + d[1], 0.0], [0.0, 0.0, yaw + d[2]]))
+    mid = (feet[0].translation + feet[1].translation) / 2
+    nominal = np.array([mid[0] - dims.foot_x, mid[1], L * (1 - stance.depth), 0, 0, 0])
+    return Placement(stance, feet[0], feet[1], nominal)
+
+
+def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, rate_hz: float,
+                       rng: np.random.Generator, ramp_s: float = 3.0) -> np.ndarray:
+    """(N, 6) postures at `rate_hz`: the nominal posture plus slow sinusoids with random
+    phases, faded in (smoothstep) over `ramp_s` so motion starts from rest."""
+    n = int(round(duration * rate_hz))
+    t = np.arange(n) / rate_hz
+    amp = np.array(placement.stance.amplitude) * [dims.leg_length, dims.leg_length, dims.leg_length, 1, 1, 1]
+    phase = rng.uniform(0, 2 * np.pi, 6)
+    wave = amp * np.sin(2 * np.pi * t[:, None] / np.array(PERIODS) + phase)
+    fade = np.clip(t / ramp_s, 0, 1)[:, None] if ramp_s > 0 else np.ones((n, 1))
+    return placement.nominal + fade * fade * (3 - 2 * fade) * wave
+
+
+def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray, q: np.ndarray) -> float:
+    """Distance (m) of the CoM's ground projection inside the convex hull of the eight
+    sole corners; negative outside."""
+    corners = np.vstack([(T.rotation @ kin.corners[s].T).T + T.translation
+                         for s, T in (("left", placement.left), ("right", placement.right))])
+    hull = ConvexHull(corners[:, :2])
+    com = posture_pose(posture).act(kin.com(q))[:2]
+    return float(-(hull.equations[:, :2] @ com + hull.equations[:, 2]).max())
+
+
+def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: float, rate_hz: float,
+                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10) -> np.ndarray:
+    """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
+    is reachable within the joint limits of `kin` and statically balanced (the CoM at
+    least a quarter sole width inside the support polygon), so any robot gets a stance
+    it can hold on a real floor."""
+    margin = 0.25 * kin.dims.sole_width
+    base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng)
+    for k in range(tries):
+        traj = placement.nominal + (shrink ** k) * (base - placement.nominal)
+        q = kin.q_init()
+        try:
+            for i, p in enumerate(traj):
+                T = posture_pose(p)
+                q = kin.solve(T.actInv(placement.left), T.actInv(placement.right), q)
+                if i % 5 == 0 and support_margin(kin, placement, p, q) < margin:
+                    raise IKError("CoM too close to the support polygon's edge")
+            return traj
+        except IKError:
+            continue
+    raise IKError(f"stance {placement.stance.name}: no reachable, balanced posture motion for this robot "
+                  f"(the nominal posture itself may be out of reach or off balance)")

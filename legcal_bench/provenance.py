@@ -1,0 +1,60 @@
+"""Which code made a result: package version, git commit, and the results version.
+
+`RESULTS_VERSION` is bumped on purpose, in the same commit, whenever a change is
+meant to move benchmark numbers; result cells are keyed on it (and on their
+settings and data), so a bump recomputes them. The git commit is recorded, not
+keyed: a commit that changes no number keeps every finished cell.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+from functools import lru_cache
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+from typing import Any
+
+RESULTS_VERSION = 1
+PACKAGE = "legcal-bench"
+
+
+def package_version() -> str:
+    try:
+        return version(PACKAGE)
+    except PackageNotFoundError:
+        return "unknown"
+
+
+def _git(*args: str) -> str | None:
+    try:
+        out = subprocess.run(["git", *args], cwd=Path(__file__).resolve().parent, capture_output=True, text=True,
+                             timeout=10, check=False)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() if out.returncode == 0 else None
+
+
+@lru_cache(maxsize=1)
+def code_version() -> dict[str, Any]:
+    """{"package", "commit" (None outside a git checkout), "dirty", "results_version"}."""
+    commit = _git("rev-parse", "HEAD")
+    dirty = None
+    if commit is not None:
+        status = _git("status", "--porcelain", "--untracked-files=no")
+        dirty = bool(status) if status is not None else None
+    return {"package": package_version(), "commit": commit, "dirty": dirty, "results_version": RESULTS_VERSION}
+
+
+def describe(v: dict[str, Any]) -> str:
+    """One line for a report: 'legcal-bench 0.2.0, commit 1a2b3c4 (dirty), results version 2'."""
+    commit = "commit unknown" if not v.get("commit") else f"commit {v['commit'][:7]}" + (
+        " (uncommitted changes)" if v.get("dirty") else "")
+    return f"legcal-bench {v.get('package', 'unknown')}, {commit}, results version {v.get('results_version', '?')}"
+
+
+def stable_hash(obj: Any) -> str:
+    """A short hash of a JSON-able object, independent of key order."""
+    text = json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]

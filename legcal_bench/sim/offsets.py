@@ -1,0 +1,58 @@
+"""Injected encoder offsets, in the paper's convention.
+
+The corrected angle is q = q_enc + dq, so a robot with offsets dq reports
+q_enc = q_true - dq. Presets map by joint role, never by position.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from legcal_bench.errors import OffsetSpecError
+from legcal_bench.paper import INJECTION_RAD
+from legcal_bench.robots.legmap import LegMap
+
+PRESETS_HELP = "none | paper | random:<deg> | twelve comma-separated radians (leg-map order)"
+
+
+def paper_injection(legmap: LegMap) -> np.ndarray:
+    """The paper's injection (rad) on this robot's 12 leg joints, by role."""
+    return np.array([INJECTION_RAD[r] for r in legmap.joint_roles])
+
+
+def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
+                    rng: np.random.Generator | None = None) -> np.ndarray:
+    """The 12-vector of offsets (rad) for `spec`; `random:<deg>` draws from `rng`
+    uniformly in [-deg, +deg] per joint."""
+    if not isinstance(spec, str):
+        try:
+            v = np.asarray(spec, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise OffsetSpecError(f"offsets: expected 12 numbers in radians, got {spec!r}") from None
+        if v.size != 12 or not np.all(np.isfinite(v)):
+            raise OffsetSpecError(f"offsets: expected 12 finite values in radians, got {v.size}")
+        return v
+    s = spec.strip()
+    if s == "none":
+        return np.zeros(12)
+    if s == "paper":
+        return paper_injection(legmap)
+    if s.startswith("random:"):
+        try:
+            deg = float(s.split(":", 1)[1])
+        except ValueError:
+            raise OffsetSpecError(f"offsets {spec!r}: write random:<deg>, e.g. random:1.5") from None
+        if not 0 <= deg <= 10:
+            raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+        if rng is None:
+            raise OffsetSpecError("offsets random:<deg> needs a seeded generator")
+        return rng.uniform(-1, 1, 12) * np.deg2rad(deg)
+    parts = s.split(",")
+    if len(parts) == 12:
+        try:
+            return resolve_offsets([float(p) for p in parts], legmap)
+        except ValueError:
+            pass
+    raise OffsetSpecError(f"offsets {spec!r} not understood: use {PRESETS_HELP}")
