@@ -17,6 +17,8 @@ import gymnasium as gym
 import mujoco
 import numpy as np
 
+from legcal_bench.errors import ConfigError
+
 
 class MujocoEnv(gym.Env, ABC):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
@@ -24,8 +26,6 @@ class MujocoEnv(gym.Env, ABC):
     def __init__(self, physics_dt: float, frame_skip: int, render_mode: str | None = None,
                  width: int = 640, height: int = 480):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            from legcal_bench.errors import ConfigError
-
             raise ConfigError(f"render_mode {render_mode!r}: use one of {self.metadata['render_modes']} or None")
         self.physics_dt = float(physics_dt)
         self.frame_skip = int(frame_skip)

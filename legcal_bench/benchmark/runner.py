@@ -18,6 +18,7 @@ from tqdm import tqdm
 
 from legcal_bench.benchmark.plan import Cell
 from legcal_bench.benchmark.tasks import THREAD_VARIABLES, collect_dataset, run_cell
+from legcal_bench.provenance import code_version
 
 RESULT_KEYS = ("native", "injected", "paired_delta_rms_deg")
 
@@ -50,7 +51,9 @@ def is_done(cell: Cell, results_dir: Path) -> bool:
 
 def run(cells: list[Cell], data_dir: str | Path, results_dir: str | Path, executor: Executor | None = None,
         workers: int = 2, scheduler: str | None = None, progress: bool = True) -> dict:
-    """Run every unfinished cell; returns counts."""
+    """Run every unfinished cell; returns counts. The code version is read once, here,
+    so every cell of a run records the code the run started with."""
+    provenance = code_version()
     data_dir, results_dir = str(Path(data_dir).resolve()), str(Path(results_dir).resolve())
     todo = [c for c in cells if not is_done(c, Path(results_dir))]
     own = executor is None
@@ -60,7 +63,7 @@ def run(cells: list[Cell], data_dir: str | Path, results_dir: str | Path, execut
         futs = [ex.submit(collect_dataset, d, data_dir) for d in datasets]
         for f in tqdm(as_completed(futs), total=len(futs), desc="collect", unit="set", disable=not progress):
             f.result()
-        futs = [ex.submit(run_cell, c, data_dir, results_dir) for c in todo]
+        futs = [ex.submit(run_cell, c, data_dir, results_dir, provenance) for c in todo]
         for f in tqdm(as_completed(futs), total=len(futs), desc="calibrate+score", unit="cell", disable=not progress):
             f.result()
     finally:

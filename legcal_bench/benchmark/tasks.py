@@ -42,13 +42,14 @@ def collect_dataset(ds: Dataset, data_dir: str) -> str:
     return str(out)
 
 
-def run_cell(cell: Cell, data_dir: str, results_dir: str) -> dict:
+def run_cell(cell: Cell, data_dir: str, results_dir: str, provenance: dict | None = None) -> dict:
     """Calibrate both session sets of a cell, score, write the cell's JSON (with its
-    resume key and the code version that made it)."""
+    resume key and the code version that made it: `provenance`, read by the runner when
+    the run starts, else now)."""
     single_thread()
     legmap = load_robot(cell.robot)
     out: dict = {"cell": asdict(cell), "robot": legmap.name, "joint_names": legmap.joint_names,
-                 "key": cell.key(), "provenance": code_version()}
+                 "key": cell.key(), "provenance": provenance or code_version()}
     try:
         _calibrate_and_score(cell, legmap, data_dir, out)
     except LegcalError as e:
