@@ -5,8 +5,10 @@ Objective over all contact segments sharing one offset vector dq:
   sum_s sum_k [ l_f ||r_feet||^2 + l_g ||r_flat||^2 ] + l_q ||W_q . dq||^2
         + l_knee ||dq_knee - dq_knee_prior||^2
 
-(residuals in `legcal_bench.contact_residuals`), bounded to |dq| <= 0.08 rad from
-dq = 0. Two solvers:
+assembled from residual terms (`legcal_bench.estimation.terms`: one inter-foot and one
+flat-ground term per contact segment, a Tikhonov and a knee-prior term) into one
+`legcal_bench.estimation.problem.Problem`, bounded to |dq| <= 0.08 rad from dq = 0.
+Two solvers:
   "projected" (default): C*_s re-estimated inside the residual (variable projection),
       with the analytic Jacobian that includes dC*_s/d dq; reaches the optimum.
   "alternating": the paper's scheme, C*_s recomputed, then a bounded solve with C*_s
@@ -31,9 +33,10 @@ from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
 from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, select_frames
-from legcal_bench.estimation.residuals import feet_residuals, flat_residuals
-from legcal_bench.geometry.lie import frechet_mean
-from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
+from legcal_bench.estimation.problem import Block, Problem
+from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
+                                           TikhonovTerm)
+from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
 
@@ -159,7 +162,7 @@ class InterFootCalibrator(Calibrator):
             else:
                 warnings.append("no straight-leg standing recording: knee prior disabled (lambda_knee -> 0)")
                 w = replace(w, lambda_knee=0.0)
-        problem = _Problem(kin, segments, w, prior, knees)
+        problem = _InterFootProblem(kin, segments, w, prior, knees, self.bound)
         t_pre = time.perf_counter() - t0
 
         # First solve, trim the largest residual frames, solve again.
@@ -173,7 +176,8 @@ class InterFootCalibrator(Calibrator):
         t_solve = time.perf_counter() - t1
 
         t2 = time.perf_counter()
-        _, J_fixed = problem.evaluate(dq, "fixed", problem.means_at(dq))
+        problem.means_at(dq)
+        _, J_fixed = problem.evaluate(dq, "fixed")
         _, J_proj = problem.evaluate(dq, "projected")
         n_data = problem.n_data_rows
         obs = analyze(J_fixed[:n_data], problem.prior_hessian(), robot.joint_names, robot.joint_roles,
@@ -214,11 +218,13 @@ def _report_text(r: FilterReport) -> str:
             f"pieces, {r.clustered_out} clustered out, {r.kept} kept")
 
 
-class _Problem:
-    """Residual vector and Jacobian of the weighted objective, per solver mode."""
+class _InterFootProblem:
+    """The weighted objective as terms over the offsets block, per contact segment an
+    inter-foot term and a flat-ground term (rows in that order), then the priors."""
 
-    def __init__(self, kin: LegKinematics, segments: list[_Prepared], w: InterFootWeights, prior, knees):
-        self.kin, self.segments, self.w, self.prior, self.knees = kin, segments, w, prior, knees
+    def __init__(self, kin: LegKinematics, segments: list[_Prepared], w: InterFootWeights, prior, knees,
+                 bound: float):
+        self.kin, self.w, self.prior, self.knees, self.bound = kin, w, prior, knees, bound
         if w.row_sigmas is None:
             self.sf = np.sqrt(w.lambda_f) * w.unit_scale * np.ones(6)
             self.sg = np.sqrt(w.lambda_g) * w.unit_scale * np.ones(5)
@@ -229,8 +235,21 @@ class _Problem:
         # Prior rows share the residual units (rad, or mrad in the matched setting).
         self.wq = np.sqrt(w.lambda_q) * w.unit_scale * np.array(list(w.w_q) * 2, dtype=float)
         self.sk = np.sqrt(w.lambda_knee) * w.unit_scale
-        self._means = [None] * len(segments)
-        self._cache = None
+        self.build(segments)
+
+    def build(self, segments: list[_Prepared]) -> None:
+        self.segments = segments
+        self.feet, terms = [], []
+        for seg in segments:
+            sk = SegmentKinematics(self.kin, seg.q_enc)
+            feet = InterFootTerm(f"{seg.name}/feet", sk, self.sf)
+            self.feet.append(feet)
+            terms += [feet, FlatGroundTerm(f"{seg.name}/flat", sk, seg.up_B, seg.R_WB, self.sg)]
+        if self.w.lambda_q > 0:
+            terms.append(TikhonovTerm(self.wq))
+        if self.prior is not None and self.w.lambda_knee > 0:
+            terms.append(KneePriorTerm(self.knees, self.prior, self.sk))
+        self.problem = Problem([Block(OFFSETS, 12, bound=self.bound)], terms)
 
     @property
     def n_data_rows(self) -> int:
@@ -243,73 +262,37 @@ class _Problem:
         return H
 
     def means_at(self, dq: np.ndarray) -> list:
-        out = []
-        for s, seg in enumerate(self.segments):
-            C = frame_kinematics(self.kin, seg.q_enc + dq).C
-            self._means[s] = frechet_mean(C, self._means[s], tol=1e-15)
-            out.append(self._means[s])
-        return out
+        return [t.update_mean(dq) for t in self.feet]
 
-    def evaluate(self, dq: np.ndarray, mode: str, means: list | None = None):
-        """Stacked residual and Jacobian: per segment its feet rows (by time), then its
-        flat rows; then the prior rows."""
-        rows, jacs = [], []
-        for s, seg in enumerate(self.segments):
-            fk = frame_kinematics(self.kin, seg.q_enc + dq)
-            if mode == "projected":
-                M = self._means[s] = frechet_mean(fk.C, self._means[s], tol=1e-15)
-            else:
-                M = means[s]
-            rf, Jf = feet_residuals(fk.C, fk.G, M, mode)
-            rg, Jg = flat_residuals(fk, seg.up_B, seg.R_WB)
-            rows += [(self.sf * rf).ravel(), (self.sg * rg).ravel()]
-            jacs += [(self.sf[:, None] * Jf).reshape(-1, 12), (self.sg[:, None] * Jg).reshape(-1, 12)]
-        if self.w.lambda_q > 0:
-            rows.append(self.wq * dq)
-            jacs.append(np.diag(self.wq))
-        if self.prior is not None and self.w.lambda_knee > 0:
-            rows.append(self.sk * (dq[self.knees] - self.prior))
-            Jk = np.zeros((len(self.knees), 12))
-            Jk[np.arange(len(self.knees)), self.knees] = self.sk
-            jacs.append(Jk)
-        return np.concatenate(rows), np.vstack(jacs)
-
-    def _fun_jac(self, mode: str, means=None):
-        def both(x):
-            if self._cache is None or not np.array_equal(self._cache[0], x):
-                self._cache = (x.copy(), *self.evaluate(x, mode, means))
-            return self._cache[1], self._cache[2]
-
-        return (lambda x: both(x)[0]), (lambda x: both(x)[1])
+    def evaluate(self, dq: np.ndarray, mode: str):
+        """Stacked residual and Jacobian with the segment means re-estimated
+        ("projected") or held at their last values ("fixed")."""
+        for t in self.feet:
+            t.mode = mode
+        return self.problem.evaluate(dq)
 
     def solve(self, dq0: np.ndarray, cal: InterFootCalibrator) -> tuple[np.ndarray, list]:
         lb, ub = -cal.bound * np.ones(12), cal.bound * np.ones(12)
         x0 = np.clip(dq0, lb + 1e-12, ub - 1e-12)
         history = []
         if cal.solver == "projected":
-            self._cache = None
-            fun, jac = self._fun_jac("projected")
-
-            def jac_logged(x):
-                history.append(x.tolist())
-                return jac(x)
-
-            jac_arg = jac_logged if cal.jacobian == "analytic" else "2-point"
+            for t in self.feet:
+                t.mode = "projected"
             # MINPACK's Levenberg-Marquardt is fastest here; the bounds are honoured by
             # re-solving with the bounded trust-region method if they would be active.
-            sol = least_squares(fun, x0, jac=jac_arg, method="lm", x_scale=1.0, ftol=cal.tol, xtol=cal.tol, gtol=cal.tol,
-                                max_nfev=100 if cal.jacobian == "analytic" else 2000)
-            if np.any(np.abs(sol.x) > cal.bound):
-                sol = least_squares(fun, np.clip(sol.x, lb, ub), jac=jac_arg, bounds=(lb, ub), method="trf", x_scale=1.0,
-                                    ftol=cal.tol, xtol=cal.tol, gtol=cal.tol, max_nfev=100)
+            sol = self.problem.solve(x0, method="lm", tol=cal.tol, jac=cal.jacobian,
+                                     max_nfev=100 if cal.jacobian == "analytic" else 2000,
+                                     on_jacobian=lambda x: history.append(x.tolist()))
             history.append(sol.x.tolist())
             return sol.x, history
         # The paper's alternation: means from the current dq, then a bounded inner solve.
         x = x0
         for _ in range(cal.max_outer):
-            means = self.means_at(x)
-            self._cache = None
-            fun, jac = self._fun_jac("fixed", means)
+            self.means_at(x)
+            for t in self.feet:
+                t.mode = "fixed"
+            self.problem.reset_cache()
+            fun, jac = self.problem.functions()
             sol = least_squares(fun, x, jac=jac if cal.jacobian == "analytic" else "2-point", bounds=(lb, ub),
                                 method="trf", ftol=paper.INNER_FTOL, max_nfev=paper.INNER_MAX_ITERATIONS)
             moved = np.abs(sol.x - x).max()
@@ -318,6 +301,8 @@ class _Problem:
             if moved < 1e-14:
                 break
         self.means_at(x)
+        for t in self.feet:
+            t.mode = "projected"
         return x, history
 
     def trim(self, dq: np.ndarray, fraction: float) -> None:
@@ -333,6 +318,4 @@ class _Problem:
             score = (feet**2).sum(1) + (flat**2).sum(1)
             keep = np.sort(np.argsort(score)[: n - int(round(fraction * n))])
             kept.append(_Prepared(seg.name, seg.q_enc[keep], seg.up_B[keep], seg.R_WB[keep], seg.frames[keep]))
-        self.segments = kept
-        self._means = [None] * len(kept)
-        self._cache = None
+        self.build(kept)

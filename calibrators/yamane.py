@@ -12,8 +12,11 @@ both soles lie flat on one plane. Sole heights alone cannot see equal hip-pitch
 offsets on both legs (they act as a pelvis pitch); the IMU term makes the problem
 well-posed, and its weight decides how the method ranks.
 
-The Jacobian is block-sparse (2 unknowns per frame + 12 shared), handed to scipy's
-trust-region solver as a sparse matrix (LSMR inner solves).
+Both terms (`legcal_bench.estimation.terms.SoleHeightTerm`, `ImuTiltTerm`) go into one
+`legcal_bench.estimation.problem.Problem` with a shared offsets block and a per-frame
+tilt block, so the Jacobian is block-sparse (2 unknowns per frame + 12 shared), handed
+to scipy's trust-region solver as a sparse matrix (LSMR inner solves); the information
+on the offsets has the per-frame tilts eliminated (Schur complement).
 
 Weights: `weights="default"` uses w_h = 1000 /m and w_imu = 1000 /rad (1 mm of height
 counts like 1 mrad of tilt; the paper gives no values); `weights="sensor"` derives them
@@ -25,9 +28,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import pinocchio as pin
-from scipy.optimize import least_squares
-from scipy.sparse import csr_matrix
 
 from legcal_bench import paper
 from legcal_bench.calibrators.base import CalibrationResult, Calibrator
@@ -36,23 +36,10 @@ from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.preprocess import PreprocessConfig, select_frames
-from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
+from legcal_bench.estimation.problem import Block, Problem
+from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
+from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
-
-
-def _rot(roll: np.ndarray, pitch: np.ndarray):
-    """R = R_y(pitch) R_x(roll) and its two partial derivatives, batched (N, 3, 3)."""
-    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
-    n = len(roll)
-    Rx, dRx = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-    Ry, dRy = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-    Rx[:, 0, 0] = 1
-    Rx[:, 1, 1], Rx[:, 1, 2], Rx[:, 2, 1], Rx[:, 2, 2] = cr, -sr, sr, cr
-    dRx[:, 1, 1], dRx[:, 1, 2], dRx[:, 2, 1], dRx[:, 2, 2] = -sr, -cr, cr, -sr
-    Ry[:, 1, 1] = 1
-    Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 2, 0], Ry[:, 2, 2] = cp, sp, -sp, cp
-    dRy[:, 0, 0], dRy[:, 0, 2], dRy[:, 2, 0], dRy[:, 2, 2] = -sp, cp, -cp, -sp
-    return Ry @ Rx, Ry @ dRx, dRy @ Rx
 
 
 class YamaneCalibrator(Calibrator):
@@ -80,7 +67,8 @@ class YamaneCalibrator(Calibrator):
             s = noise_sigmas(recordings[0].sensor_model, kin.dims.leg_length)
             if s is not None:
                 w_h, w_imu = 1.0 / s["height"], 1.0 / s["tilt"]
-        return (self.w_h_opt or w_h), (self.w_imu_opt or w_imu)
+        return (w_h if self.w_h_opt is None else float(self.w_h_opt)), \
+            (w_imu if self.w_imu_opt is None else float(self.w_imu_opt))
 
     def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
         t0 = time.perf_counter()
@@ -105,18 +93,14 @@ class YamaneCalibrator(Calibrator):
         # Start each root orientation at the IMU's tilt: up = R^T e_z.
         roll0 = np.arctan2(up[:, 1], up[:, 2])
         pitch0 = np.arctan2(-up[:, 0], np.hypot(up[:, 1], up[:, 2]))
-        corners = {s: kin.corners[s] for s in ("left", "right")}
-        problem = _YamaneProblem(kin, Q, up, corners, w_h, w_imu)
-        x0 = np.concatenate([np.zeros(12), np.column_stack([roll0, pitch0]).ravel()])
-        lb = np.concatenate([-self.bound * np.ones(12), -np.inf * np.ones(2 * n)])
-        ub = -lb
+        problem = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
+                          [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(up, w_imu)])
+        x0 = problem.pack({TILT: np.column_stack([roll0, pitch0])})
         t1 = time.perf_counter()
-        sol = least_squares(problem.residual, x0, jac=problem.jacobian, bounds=(lb, ub), method="trf",
-                            tr_solver="lsmr", x_scale=1.0, ftol=self.tol, xtol=self.tol, gtol=self.tol,
-                            max_nfev=100)
+        sol = problem.solve(x0, method="trf", tol=self.tol, max_nfev=100)
         t_solve = time.perf_counter() - t1
-        dq = sol.x[:12]
-        w = np.linalg.eigvalsh(problem.information(sol.x))
+        dq = problem.unpack(sol.x)[OFFSETS]
+        w = np.linalg.eigvalsh(problem.information(sol.x)[0])
         conditioning = {"kappa_H_data": float(w[-1] / w[0]) if w[0] > 0 else float("inf"),
                         "eigenvalues_H_data": w.tolist()}
         return CalibrationResult(
@@ -129,73 +113,3 @@ class YamaneCalibrator(Calibrator):
             timing_s={"preprocess": t1 - t0, "solve": t_solve, "total": time.perf_counter() - t0},
             settings=self.settings(),
         )
-
-
-class _YamaneProblem:
-    def __init__(self, kin, Q, up, corners, w_h, w_imu):
-        self.kin, self.Q, self.up, self.w_h, self.w_imu = kin, Q, up, w_h, w_imu
-        self.c = np.vstack([corners["left"], corners["right"]]).reshape(2, 4, 3)  # corners in the sole frames
-        self.c_skew = np.array([[pin.skew(c) for c in side] for side in self.c])  # (2, 4, 3, 3)
-        self._cache = None
-
-    def _eval(self, x):
-        if self._cache is not None and np.array_equal(self._cache[0], x):
-            return self._cache[1]
-        kin, n = self.kin, len(self.Q)
-        dq, ang = x[:12], x[12:].reshape(n, 2)
-        R, dR_roll, dR_pitch = _rot(ang[:, 0], ang[:, 1])
-        fk = frame_kinematics(kin, self.Q + dq)
-        Tr = np.stack([fk.R_L, fk.R_R], axis=1)  # (n, 2, 3, 3)
-        Tt = np.stack([fk.p_L, fk.p_R], axis=1)
-        Jl = np.stack([fk.J_L, fk.J_R], axis=1)
-        P = (np.einsum("sic,nsac->nsia", self.c, Tr) + Tt[:, :, None, :]).reshape(n, 8, 3)
-        # Corner velocity in the sole frame, v + w x c = J_v - [c]x J_w, then in the pelvis frame.
-        local = Jl[:, :, None, :3, :] - np.einsum("sivw,nswc->nsivc", self.c_skew, Jl[:, :, 3:, :])
-        world = np.einsum("nsab,nsibc->nsiac", Tr, local)
-        Jp = np.zeros((n, 8, 3, 12))
-        Jp[:, :4, :, :6], Jp[:, 4:, :, 6:] = world[:, 0], world[:, 1]
-        z = np.einsum("nj,nvj->nv", R[:, 2, :], P)
-        r_h = self.w_h * (z - z.mean(axis=1, keepdims=True))
-        up_model = R[:, 2, :]  # R^T e_z, as rows
-        r_i = self.w_imu * (up_model - self.up)
-        out = (np.concatenate([np.column_stack([r_h, r_i]).ravel()]), R, dR_roll, dR_pitch, P, Jp)
-        self._cache = (x.copy(), out)
-        return out
-
-    def residual(self, x):
-        return self._eval(x)[0]
-
-    def blocks(self, x):
-        """Per-frame Jacobian blocks: (n, 11, 12) w.r.t. dq and (n, 11, 2) w.r.t. the
-        frame's own roll and pitch (rows: 8 heights, then 3 IMU)."""
-        _, R, dRr, dRp, P, Jp = self._eval(x)
-        n = len(self.Q)
-        Bq = np.zeros((n, 11, 12))
-        Ba = np.zeros((n, 11, 2))
-        # Heights: d z_kv = e_z^T (R_k dP + dR_k P), centred over the 8 vertices.
-        Jz = np.einsum("nj,nvjc->nvc", R[:, 2, :], Jp)
-        Bq[:, :8] = self.w_h * (Jz - Jz.mean(axis=1, keepdims=True))
-        for j, dR in enumerate((dRr, dRp)):
-            dz = np.einsum("nj,nvj->nv", dR[:, 2, :], P)
-            Ba[:, :8, j] = self.w_h * (dz - dz.mean(axis=1, keepdims=True))
-            # IMU rows: d(R^T e_z) = (dR)^T e_z, the third row of dR.
-            Ba[:, 8:, j] = self.w_imu * dR[:, 2, :]
-        return Bq, Ba
-
-    def jacobian(self, x):
-        Bq, Ba = self.blocks(x)
-        n = len(self.Q)
-        rows = np.arange(11 * n).reshape(n, 11)
-        r = np.concatenate([np.repeat(rows, 12, axis=1).ravel(), np.repeat(rows, 2, axis=1).ravel()])
-        c = np.concatenate([np.tile(np.arange(12), 11 * n),
-                            (12 + 2 * np.arange(n)[:, None, None] + np.arange(2)[None, None, :]).repeat(11, 1).ravel()])
-        v = np.concatenate([Bq.ravel(), Ba.ravel()])
-        return csr_matrix((v, (r, c)), shape=(11 * n, 12 + 2 * n))
-
-    def information(self, x) -> np.ndarray:
-        """Information on dq with each frame's orientation eliminated (Schur complement)."""
-        Bq, Ba = self.blocks(x)
-        Hqq = np.einsum("nri,nrj->ij", Bq, Bq)
-        Hqa = np.einsum("nri,nrj->nij", Bq, Ba)
-        Haa = np.einsum("nri,nrj->nij", Ba, Ba)
-        return Hqq - np.einsum("nij,njk,nlk->il", Hqa, np.linalg.inv(Haa), Hqa)

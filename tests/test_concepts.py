@@ -25,7 +25,7 @@ CONCEPTS = [
     ("saving a figure", r"\.savefig\(", "legcal_bench/files/plots.py"),
     ("a report's two files", r"""(report|\{name\})\.(md|json)["']""", "legcal_bench/files/reports.py"),
     ("an atomic rename", r"os\.replace\(", "legcal_bench/files/atomic.py"),
-    ("MuJoCo's quaternion order", r"\[q\[3\],\s*q\[0\],\s*q\[1\],\s*q\[2\]\]", "legcal_bench/geometry/poses.py"),
+    ("MuJoCo's quaternion order", r"as_quat\(|from_quat\(", "legcal_bench/geometry/poses.py"),
     ("an error class", r"^class \w+Error\(", "legcal_bench/errors.py"),
     ("the posture bounds", r"0\.25 \* L", "legcal_bench/protocol/stances.py"),
 ]

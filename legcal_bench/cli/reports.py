@@ -19,7 +19,8 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
 def cmd_bench_speed(a: argparse.Namespace) -> int:
     from legcal_bench.reports.bench_speed import run_bench_speed
 
-    print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, progress=not a.quiet))
+    print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, rounds=a.rounds, baseline=a.baseline,
+                          progress=not a.quiet))
     return 0
 
 
@@ -60,9 +61,14 @@ def add_commands(sub) -> None:
     rp.add_argument("--quiet", action="store_true")
     rp.set_defaults(func=cmd_reproduce)
 
-    bs = sub.add_parser("bench-speed", help="time the calibrators (analytic vs forward-difference Jacobians)")
+    from legcal_bench.reports.bench_speed import BASELINE
+
+    bs = sub.add_parser("bench-speed", help="time calibration and collection, the code at hand against a baseline commit")
     bs.add_argument("--robot", default="a3")
-    bs.add_argument("--repeats", type=int, default=5)
+    bs.add_argument("--repeats", type=int, default=5, help="calibrations per case and round (default 5)")
+    bs.add_argument("--rounds", type=int, default=2, help="alternating rounds of baseline and current (default 2)")
+    bs.add_argument("--baseline", default=BASELINE,
+                    help=f"commit to compare with (default {BASELINE}, before the calibration core); none: skip")
     bs.add_argument("--out", default="reports/bench_speed")
     bs.add_argument("--quiet", action="store_true")
     bs.set_defaults(func=cmd_bench_speed)

@@ -21,13 +21,12 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-import pinocchio as pin
 from scipy.cluster.vq import kmeans2
 
 from legcal_bench.geometry.lie import Exp, Log, frechet_mean, inverse
 from legcal_bench.paper import (GYRO_GUARD_RAD_S, LOCAL_MEAN_WINDOW_S, N_MAX_PER_STANCE,
                                 ROTATION_RESIDUAL_MAX_DEG)
-from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 
 @dataclass
@@ -67,24 +66,19 @@ class FilterReport:
     pieces: list[str] = field(default_factory=list)
 
 
-def _inter_foot(kin: LegKinematics, Q: np.ndarray) -> np.ndarray:
-    return np.array([kin.inter_foot(q).homogeneous for q in Q])
-
-
-def _local_residuals(C: list, times: np.ndarray, window_s: float) -> np.ndarray:
+def _local_residuals(C: np.ndarray, times: np.ndarray, window_s: float) -> np.ndarray:
     """Log(C_local^-1 C_k) with C_local the Frechet mean of C over [t_k - w/2, t_k + w/2].
 
     The local means are moving averages of Log coordinates about the segment's mean:
     exact to second order in the within-window dispersion (far below the thresholds),
     and O(N) instead of O(N x window)."""
     M = frechet_mean(C, tol=1e-12)
-    Minv = inverse(M[None])[0]
-    tau = np.array([Log(pin.SE3(Minv @ c)) for c in C])
+    tau = Log(inverse(M) @ C)
     csum = np.vstack([np.zeros(6), np.cumsum(tau, axis=0)])
     lo = np.searchsorted(times, times - window_s / 2, side="left")
     hi = np.searchsorted(times, times + window_s / 2, side="right")
-    local = [pin.SE3(M) * Exp((csum[h] - csum[l]) / (h - l)) for l, h in zip(lo, hi)]
-    return np.array([Log(L.actInv(pin.SE3(c))) for L, c in zip(local, C)])
+    local = M @ Exp((csum[hi] - csum[lo]) / (hi - lo)[:, None])
+    return Log(inverse(local) @ C)
 
 
 def select_frames(kin: LegKinematics, name: str, time: np.ndarray, q_enc: np.ndarray, imu_acc: np.ndarray,
@@ -100,7 +94,7 @@ def select_frames(kin: LegKinematics, name: str, time: np.ndarray, q_enc: np.nda
     idx = idx[still]
     if len(idx) < cfg.min_frames:
         return [], rep
-    C = _inter_foot(kin, q_enc[idx])
+    C = frame_kinematics(kin, q_enc[idx]).C
     res = _local_residuals(C, time[idx], cfg.window_s)
     rot_bad = np.linalg.norm(res[:, 3:], axis=1) > cfg.max_rotation_residual
     trans_bad = (np.linalg.norm(res[:, :3], axis=1) > cfg.max_translation_residual) & ~rot_bad

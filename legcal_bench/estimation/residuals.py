@@ -24,7 +24,6 @@ G_k d = [-Ad(C_k^-1) J_L | J_R] d, so with E_k = M^-1 C_k:
 from __future__ import annotations
 
 import numpy as np
-import pinocchio as pin
 
 from legcal_bench.geometry.lie import Jl_inv, Jr_inv, Log, inverse
 from legcal_bench.robots.kinematics import FrameKinematics
@@ -50,11 +49,12 @@ def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with
         return r, None
     J = np.zeros((n, 5, 12))
     # Height: u . (R_L v_L - R_R v_R), v the local linear velocity.
-    J[:, 0, :6] = np.einsum("ni,nij,njk->nk", up_B, fk.R_L, fk.J_L[:, :3])
-    J[:, 0, 6:] = -np.einsum("ni,nij,njk->nk", up_B, fk.R_R, fk.J_R[:, :3])
+    u = up_B[:, None, :]
+    J[:, 0, :6] = (u @ fk.R_L @ fk.J_L[:, :3])[:, 0]
+    J[:, 0, 6:] = -(u @ fk.R_R @ fk.J_R[:, :3])[:, 0]
     # Normals: d(R_WB R e_z) = R_WB R (omega x e_z).
-    J[:, 1:3, :6] = np.einsum("nij,njk,kl,nlm->nim", R_WB[:, :2], fk.R_L, _EZ_CROSS, fk.J_L[:, 3:])
-    J[:, 3:5, 6:] = np.einsum("nij,njk,kl,nlm->nim", R_WB[:, :2], fk.R_R, _EZ_CROSS, fk.J_R[:, 3:])
+    J[:, 1:3, :6] = R_WB[:, :2] @ fk.R_L @ _EZ_CROSS @ fk.J_L[:, 3:]
+    J[:, 3:5, 6:] = R_WB[:, :2] @ fk.R_R @ _EZ_CROSS @ fk.J_R[:, 3:]
     return r, J
 
 
@@ -63,19 +63,11 @@ def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fix
 
     mode "fixed": M held constant (the paper's inner solve); "projected": M = M(dq)
     re-estimated with dq (variable projection; requires M to be the Frechet mean)."""
-    n = len(C)
-    E = inverse(M[None])[0] @ C
-    r = np.empty((n, 6))
-    A = np.empty((n, 6, 6))
-    B = np.empty((n, 6, 6)) if mode == "projected" else None
-    for k in range(n):
-        Ek = pin.SE3(E[k])
-        r[k] = Log(Ek)
-        A[k] = Jr_inv(Ek)
-        if B is not None:
-            B[k] = Jl_inv(Ek)
+    r = Log(inverse(M) @ C)
+    A = Jr_inv(r)
     J = A @ G
     if mode == "projected":
+        B = Jl_inv(r)
         correction = np.linalg.solve(B.sum(axis=0), J.sum(axis=0))  # S^-1 sum_j A_j G_j
         J -= B @ correction
     return r, J

@@ -86,27 +86,22 @@ def _segments(cfg: CollectConfig, rng: np.random.Generator):
 
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,
                    jitter_rad: float, progress=None) -> tuple[dict, dict]:
-    """Run one segment; returns stacked observations and ground truth."""
+    """Run one segment; returns stacked observations and ground truth. The posture
+    motion's IK is solved once, in one batch (`feasible_trajectory`), and handed to the
+    simulator (`DoubleSupportSim.run`)."""
     rng = np.random.default_rng(seed)  # the stream Gymnasium's reset(seed=seed) gives the env
     placement = place(ALL_STANCES[stance], sim.true_kin.dims, rng, jitter_m, jitter_rad)
     sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
     sim.observe(rng)  # the reset observation (not logged; its noise draws keep the env's stream)
     n = int(round(duration * sim.rate_hz))
-    if stance == "standing":
-        traj = np.repeat(sim.posture[None], n, axis=0)
-    else:
-        traj = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz, np.random.default_rng(seed + 7919))
     low, high = posture_bounds(sim.nominal.dims)
-    obs_l, truth_l = [], []
-    for posture in traj:
-        sim.step(np.clip(posture, low, high))
-        obs_l.append(sim.observe(rng))
-        truth_l.append(sim.truth())
-        if progress is not None:
-            progress.update(1)
-    stack = {k: np.array([o[k] for o in obs_l]) for k in obs_l[0]}
-    truth = {k: np.array([t[k] for t in truth_l]) for k in truth_l[0]}
-    return stack, truth
+    if stance == "standing":
+        return sim.run(np.clip(np.repeat(sim.posture[None], n, axis=0), low, high), rng, progress=progress)
+    traj, q_cmd = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz,
+                                      np.random.default_rng(seed + 7919), return_q=True)
+    clipped = np.clip(traj, low, high)
+    q_cmd[(clipped != traj).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
+    return sim.run(clipped, rng, q_cmd=q_cmd, progress=progress)
 
 
 def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> CollectSummary:

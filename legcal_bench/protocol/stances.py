@@ -19,8 +19,10 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull
 
 from legcal_bench.errors import IKError
-from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
+from legcal_bench.geometry.poses import pose_xyz_rpy
 from legcal_bench.robots.kinematics import LegKinematics, RobotDims
+from legcal_bench.geometry.poses import posture_poses
+from legcal_bench.sim.double_support import posture_ik
 
 
 @dataclass(frozen=True)
@@ -103,35 +105,39 @@ def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, r
     return placement.nominal + fade * fade * (3 - 2 * fade) * wave
 
 
-def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray, q: np.ndarray) -> float:
+def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray,
+                   q: np.ndarray) -> float | np.ndarray:
     """Distance (m) of the CoM's ground projection inside the convex hull of the eight
-    sole corners; negative outside."""
+    sole corners; negative outside. `posture` (6,) and `q` (12,) give a float; postures
+    (N, 6) and their joint angles (N, 12) give the (N,) margins."""
     corners = np.vstack([(T.rotation @ kin.corners[s].T).T + T.translation
                          for s, T in (("left", placement.left), ("right", placement.right))])
     hull = ConvexHull(corners[:, :2])
-    com = posture_pose(posture).act(kin.com(q))[:2]
-    return float(-(hull.equations[:, :2] @ com + hull.equations[:, 2]).max())
+    T_WB = posture_poses(posture)
+    com = np.einsum("nij,nj->ni", T_WB[:, :2, :3], np.array([kin.com(qk) for qk in np.reshape(q, (-1, 12))]))
+    com += T_WB[:, :2, 3]
+    margins = -(com @ hull.equations[:, :2].T + hull.equations[:, 2]).max(axis=1)
+    return float(margins[0]) if np.ndim(posture) == 1 else margins
 
 
 def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: float, rate_hz: float,
-                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10) -> np.ndarray:
+                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10, return_q: bool = False):
     """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
     is reachable within the joint limits of `kin` and statically balanced (the CoM at
-    least a quarter sole width inside the support polygon), so any robot gets a stance
-    it can hold on a real floor."""
+    least a quarter sole width inside the support polygon, checked every fifth frame),
+    so any robot gets a stance it can hold on a real floor. Returns the postures (N, 6),
+    with `return_q` also their joint angles (N, 12) on `kin` (the whole trajectory's IK
+    is solved in one batch, `posture_ik`)."""
     margin = 0.25 * kin.dims.sole_width
     base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng)
     for k in range(tries):
         traj = placement.nominal + (shrink ** k) * (base - placement.nominal)
-        q = kin.q_init()
         try:
-            for i, p in enumerate(traj):
-                T = posture_pose(p)
-                q = kin.solve(T.actInv(placement.left), T.actInv(placement.right), q)
-                if i % 5 == 0 and support_margin(kin, placement, p, q) < margin:
-                    raise IKError("CoM too close to the support polygon's edge")
-            return traj
+            q = posture_ik(kin, placement.left, placement.right, traj)
         except IKError:
             continue
+        if (support_margin(kin, placement, traj[::5], q[::5]) < margin).any():
+            continue
+        return (traj, q) if return_q else traj
     raise IKError(f"stance {placement.stance.name}: no reachable, balanced posture motion for this robot "
                   f"(the nominal posture itself may be out of reach or off balance)")

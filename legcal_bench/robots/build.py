@@ -17,6 +17,7 @@ import yaml
 from dm_control import mjcf
 
 from legcal_bench.files.atomic import atomic_write_text
+from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.design import DESIGNS, LEG_ROLES, ROLE_AXIS, LegDesign
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, Joint, Leg, LegMap
 
@@ -139,15 +140,15 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
             from scipy.spatial.transform import Rotation
 
             rot = Rotation.from_euler("xyz", foot_frame_rpy)
-            foot.quat = np.roll(rot.as_quat(), 1).tolist()  # wxyz
+            foot.quat = wxyz(rot).tolist()
             inv = rot.inv()
             for child in foot.all_children():
                 if child.tag == "joint":
                     child.axis = inv.apply(child.axis).round(12).tolist()
                 elif child.tag in ("geom", "site", "inertial"):
                     child.pos = inv.apply(child.pos).round(9).tolist()
-                    q = inv * Rotation.from_quat(np.roll(child.quat, -1)) if child.quat is not None else inv
-                    child.quat = np.roll(q.as_quat(), 1).round(12).tolist()
+                    q = inv * from_wxyz(child.quat) if child.quat is not None else inv
+                    child.quat = wxyz(q).round(12).tolist()
             sole = FrameSpec(body=foot.name, pos=tuple(inv.apply(sole_pos).round(9).tolist()),
                              rpy=tuple(inv.as_euler("xyz").tolist()))
         legs[side] = Leg(tuple(joints), sole, corners, ft)

@@ -5,15 +5,23 @@ matters: T_BF(q) is the sole pose in the pelvis frame, and the inter-foot transf
 C(q) = T_BFL(q)^-1 T_BFR(q), the pose of the right sole in the left-sole frame.
 `q` is always the 12-vector of leg angles in leg-map order (left then right).
 
-`frame_kinematics` is the batched path (all frames of a recording at once) that the
-estimators, the scores and the env's reward use; the per-posture methods of
-`LegKinematics` serve IK and single postures. The pitch sum of a leg,
-s = dq_hip_pitch + dq_knee + dq_ankle_pitch (each signed by its axis direction), is
-what orientation alone observes of the parallel pitch chain (`pitch_sums`).
+Two paths compute the same kinematics:
+
+* the per-posture methods of `LegKinematics` (`sole_poses`, `sole_jacobian`, `solve`,
+  ...) call Pinocchio on one posture (single postures, the simulator's IK);
+* the batched path (`frame_kinematics`, `LegKinematics.sole_poses_batch`,
+  `LegKinematics.solve_batch`) evaluates all N frames of a recording at once with
+  numpy, on each leg's product of exponentials (`LegPoE`) that `LegKinematics`
+  extracts from the Pinocchio model when it is built (and checks against it).
+
+The pitch sum of a leg, s = dq_hip_pitch + dq_knee + dq_ankle_pitch (each signed by its
+axis direction), is what orientation alone observes of the parallel pitch chain
+(`pitch_sums`).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -22,7 +30,7 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 
 from legcal_bench.errors import IKError, LegMapError
-from legcal_bench.geometry.lie import adjoint, inverse
+from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
 from legcal_bench.robots.design import PITCH_ROLES
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
@@ -37,6 +45,58 @@ class RobotDims:
     foot_x: float  # fore-aft sole position at zero
     sole_length: float
     sole_width: float
+
+
+@dataclass(frozen=True)
+class LegPoE:
+    """One leg as a product of exponentials, read off the Pinocchio model at the neutral
+    configuration (all leg joints at zero, held joints at their angles):
+
+        T_B_sole(q) = M[0] exp(S[0] q_0) M[1] exp(S[1] q_1) ... M[5] exp(S[5] q_5) M_sole
+
+    in chain order (pelvis to foot). M[0] is the first leg joint's frame in the pelvis
+    frame, M[k] joint k's frame in joint k-1's (both including any fixed body or held
+    joint in between), M_sole the sole frame in the last joint's frame, and S[k] the
+    joint's motion subspace [v, w] in its own frame (Pinocchio's LOCAL joint Jacobian
+    column). `cols[k]` is the column of q (0..11) that drives chain joint k.
+    """
+
+    M: np.ndarray  # (6, 4, 4)
+    S: np.ndarray  # (6, 6)
+    M_sole: np.ndarray  # (4, 4)
+    cols: np.ndarray  # (6,) int
+
+
+def _hat(S: np.ndarray) -> np.ndarray:
+    """4x4 se(3) matrix of a twist [v, w]."""
+    X = np.zeros((4, 4))
+    w = S[3:]
+    X[:3, :3] = [[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]]
+    X[:3, 3] = S[:3]
+    return X
+
+
+def _screw_terms(S: np.ndarray) -> tuple[float, bool, np.ndarray]:
+    """exp(S q) = I + f1 X1 + f2 X2 + f3 X3 with theta = scale q and constant X:
+    a screw (w != 0) has f = (sin theta, 1 - cos theta, theta - sin theta) with X1 = S^,
+    X2 = S^2, X3 = S^ + S^3 (the pitch part, zero for a revolute joint), S normalised to
+    |w| = 1; a prismatic joint (w = 0) has f = (theta, 0, 0) with |v| = 1.
+    Returns (scale, is_screw, X (4, 4, 4): I, X1, X2, X3)."""
+    w, v = S[3:], S[:3]
+    scale = float(np.linalg.norm(w))
+    screw = scale > 1e-12
+    if not screw:
+        scale = float(np.linalg.norm(v))
+    Sn = S / scale
+    X1 = _hat(Sn)
+    X = np.zeros((4, 4, 4))
+    X[0] = np.eye(4)
+    X[1] = X1
+    if screw:
+        X[2] = X1 @ X1
+        wn = Sn[3:]
+        X[3, :3, 3] = wn * (wn @ Sn[:3])  # S^ + S^3 = [[0, w w^T v], [0, 0]] for |w| = 1
+    return scale, screw, X
 
 
 class LegKinematics:
@@ -54,6 +114,7 @@ class LegKinematics:
         self.q_neutral = pin.neutral(m)
         self.leg_q_idx = np.empty(12, dtype=int)
         self.leg_v_idx = np.empty(12, dtype=int)
+        self.leg_joint_ids = np.empty(12, dtype=int)
         for i, name in enumerate(legmap.joint_names):
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: leg joint '{name}' is not in {legmap.mjcf}")
@@ -61,6 +122,7 @@ class LegKinematics:
             if j.nq != 1 or j.nv != 1:
                 raise LegMapError(f"{legmap.source}: leg joint '{name}' is not a 1-DoF joint")
             self.leg_q_idx[i], self.leg_v_idx[i] = j.idx_q, j.idx_v
+            self.leg_joint_ids[i] = m.getJointId(name)
         for name, angle in legmap.held_joints_rad.items():
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.mjcf}")
@@ -79,6 +141,8 @@ class LegKinematics:
         finite = np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
         self.q_lower = np.where(finite, lower, -np.pi)
         self.q_upper = np.where(finite, upper, np.pi)
+        self.poe = self._extract_poe()
+        self._prepare_batched()
 
     def _add_frame(self, name: str, spec: FrameSpec, where: str) -> int:
         m = self.model
@@ -91,6 +155,179 @@ class LegKinematics:
         body = m.frames[m.getFrameId(spec.body)]
         placement = body.placement * pose_xyz_rpy(spec.pos, spec.rpy)
         return m.addFrame(pin.Frame(name, body.parentJoint, placement, pin.FrameType.OP_FRAME))
+
+    # ------------------------------------------------- product of exponentials
+    def _extract_poe(self) -> dict[str, LegPoE]:
+        """Each leg's product of exponentials, from Pinocchio at the neutral configuration
+        (leg joints at zero, held joints applied), checked against Pinocchio's forward
+        kinematics at a bent configuration."""
+        m, d, src = self.model, self.data, self.legmap.source
+        names = self.legmap.joint_names
+        leg_ids = set(int(j) for j in self.leg_joint_ids)
+        moves = {f: set(int(j) for j in m.supports[m.frames[f].parentJoint]) & leg_ids
+                 for f in (self.pelvis_frame, self.imu_frame)}
+        if moves[self.pelvis_frame]:
+            raise LegMapError(f"{src}: the pelvis '{self.legmap.pelvis}' is moved by leg joints "
+                              f"{sorted(m.names[j] for j in moves[self.pelvis_frame])}; it must be the base the legs hang from")
+        if moves[self.imu_frame]:
+            raise LegMapError(f"{src}: the IMU is moved by leg joints {sorted(m.names[j] for j in moves[self.imu_frame])}; "
+                              "it must be on the pelvis or the upper body")
+        q0 = self.q_full(np.zeros(12))
+        pin.computeJointJacobians(m, d, q0)
+        pin.updateFramePlacements(m, d)
+        oMB = d.oMf[self.pelvis_frame]
+        poe = {}
+        for s in SIDES:
+            cols = self.leg_cols[s]
+            ids = self.leg_joint_ids[cols]
+            support = [int(j) for j in m.supports[m.frames[self.sole_frame[s]].parentJoint]]
+            on_chain = set(support) & leg_ids
+            missing = [names[c] for c, j in zip(cols, ids) if j not in on_chain]
+            foreign = sorted(m.names[j] for j in on_chain - set(int(j) for j in ids))
+            if missing or foreign:
+                raise LegMapError(f"{src}: legs.{s}: the joints between the pelvis and the {s} sole must be that "
+                                  f"leg's six joints (not on the chain: {missing}; from another leg: {foreign})")
+            order = np.argsort([support.index(int(j)) for j in ids])  # chain order, pelvis to foot
+            chain_ids, chain_cols = [int(j) for j in ids[order]], cols[order]
+            M, S = np.empty((6, 4, 4)), np.empty((6, 6))
+            prev = oMB
+            for k, (jid, c) in enumerate(zip(chain_ids, chain_cols)):
+                M[k] = prev.actInv(d.oMi[jid]).homogeneous
+                S[k] = pin.getJointJacobian(m, d, jid, pin.LOCAL)[:, self.leg_v_idx[c]]
+                if not np.any(S[k]):
+                    raise LegMapError(f"{src}: leg joint '{names[c]}' has no motion")
+                prev = d.oMi[jid]
+            M_sole = prev.actInv(d.oMf[self.sole_frame[s]]).homogeneous
+            poe[s] = LegPoE(M, S, M_sole, chain_cols)
+        # Pinocchio stays the reference: the chains must reproduce it (e.g. a joint whose
+        # motion is not the exponential of a constant twist would not).
+        q_test = 0.3 * np.sin(np.arange(1, 13) * 1.7) + 0.2
+        T_poe = self._poe_poses(poe, q_test)
+        pin.framesForwardKinematics(m, d, self.q_full(q_test))
+        for i, s in enumerate(SIDES):
+            T_pin = self._rel(self.sole_frame[s]).homogeneous
+            if np.abs(T_poe[i] - T_pin).max() > 1e-9:
+                raise LegMapError(f"{src}: legs.{s}: the leg joints are not all screw (revolute or prismatic) "
+                                  "joints; the batched kinematics cannot represent this leg")
+        return poe
+
+    @staticmethod
+    def _poe_poses(poe: dict[str, LegPoE], q: np.ndarray) -> list[np.ndarray]:
+        """Plain (unbatched) evaluation of the products of exponentials, for the check."""
+        out = []
+        for s in SIDES:
+            c = poe[s]
+            T = np.eye(4)
+            for k in range(6):
+                scale, screw, X = _screw_terms(c.S[k])
+                t = scale * q[c.cols[k]]
+                f = (1.0, np.sin(t), 1 - np.cos(t), t - np.sin(t)) if screw else (1.0, t, 0.0, 0.0)
+                T = T @ c.M[k] @ np.tensordot(f, X, axes=1)
+            out.append(T @ c.M_sole)
+        return out
+
+    def _prepare_batched(self) -> None:
+        """Constants of the batched path, which runs on the inverse chain. With
+        exp(S q) = sum_i f_i(theta) X_i (`_screw_terms`), A_k^-1 = exp(-S_k q_k) M_k^-1
+        = sum_i f_i(-theta) X_i M_k^-1 (the last joint's with M_sole^-1 in front), so all
+        twelve A_k^-1 of N frames are one product of (2, 6, 16, 4) constants with the
+        (2, 6, 4, N) coefficients."""
+        A_inv = np.empty((2, 6, 4, 4, 4))  # side, chain joint, term, 4x4
+        scale, screw = np.empty((2, 6)), np.empty((2, 6), dtype=bool)
+        K = np.zeros((2, 6, 6, 4, 4))
+        for i, s in enumerate(SIDES):
+            c = self.poe[s]
+            for k in range(6):
+                scale[i, k], screw[i, k], X = _screw_terms(c.S[k])
+                A_inv[i, k] = X @ np.linalg.inv(c.M[k])
+                for r in range(3):  # [R v, R w] = K @ H.ravel() for a 4x4 H with rotation R
+                    K[i, k, r, r, :3] = c.S[k, :3]
+                    K[i, k, 3 + r, r, :3] = c.S[k, 3:]
+            A_inv[i, 5] = np.linalg.inv(c.M_sole) @ A_inv[i, 5]
+        self._A_inv = A_inv.reshape(2, 6, 4, 16).transpose(0, 1, 3, 2).copy()  # (2, 6, 16 entries, 4 terms)
+        self._K = K.reshape(2, 6, 6, 16)
+        self._M_sole_inv = np.array([np.linalg.inv(self.poe[s].M_sole) for s in SIDES])
+        self._scale, self._screw = scale, screw
+        self._chain_cols = np.array([self.poe[s].cols for s in SIDES])  # (2, 6) columns of q
+        # Column k of a leg's LOCAL sole Jacobian sits at position _jac_pos[k] (leg-map order).
+        self._jac_pos = np.array([self.poe[s].cols - self.leg_cols[s][0] for s in SIDES])
+        self._prismatic = [np.flatnonzero(~screw[i]) for i in range(2)]
+        self._workspace: dict[str, np.ndarray] = {}
+
+    _CHUNK = 512  # frames per block of the batched path (its scratch arrays stay small)
+
+    def _work(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        """A reusable scratch array (fresh large arrays would cost page faults on every
+        call). The batched path is not re-entrant, like Pinocchio's shared `data`."""
+        size = math.prod(shape)
+        buf = self._workspace.get(name)
+        if buf is None or buf.size < size:
+            buf = self._workspace[name] = np.empty(size)
+        return buf[:size].reshape(shape)
+
+    def _chain_block(self, Q: np.ndarray, sides: list[int], jacobian: bool):
+        """Both (or one) legs' kinematics for the rows of Q (n <= _CHUNK, 12), with the
+        frame index last (4x4 matrices as (4, 4, n)) so each step is a few long vector
+        operations. Returns scratch views, valid until the next call: T^-1
+        (n_sides, 4, 4, n), the inverse sole poses in the pelvis frame, and (with
+        `jacobian`) Y (n_sides, 6, 6, n), Y[s, k] the LOCAL sole Jacobian column of chain
+        joint k (leg-map column `_jac_pos[s, k]`)."""
+        ns, n = len(sides), len(Q)
+        w = self._work
+        theta = w("theta", (ns, 6, n))
+        np.negative(Q[:, self._chain_cols[sides]].transpose(1, 2, 0), out=theta)  # the inverse chain: -q
+        theta *= self._scale[sides][..., None]
+        F = w("F", (ns, 6, 4, n))  # exp(S theta) = sum_i F_i X_i
+        F[:, :, 0] = 1.0
+        np.sin(theta, out=F[:, :, 1])
+        np.cos(theta, out=F[:, :, 2])
+        np.subtract(1.0, F[:, :, 2], out=F[:, :, 2])
+        np.subtract(theta, F[:, :, 1], out=F[:, :, 3])
+        for i, s in enumerate(sides):
+            for k in self._prismatic[s]:
+                F[i, k, 1], F[i, k, 2:] = theta[i, k], 0.0
+        A_inv = w("A_inv", (ns, 6, 16, n))
+        np.matmul(self._A_inv[sides], F, out=A_inv)  # A_k^-1 = exp(-S_k q_k) M_k^-1
+        A_inv = A_inv.reshape(ns, 6, 4, 4, n)
+        # D_k = B_k^-1, where B_k = A_{k+1} ... A_5 is joint k's frame -> sole:
+        # D_5 = M_sole^-1, D_{k-1} = D_k A_k^-1, and T^-1 = D_0 A_0^-1.
+        D = w("D", (ns, 6, 4, 4, n))
+        D[:, 5] = self._M_sole_inv[sides][..., None]
+        D[:, 4] = A_inv[:, 5]
+        for k in range(4, 0, -1):
+            _mul_soa(D[:, k], A_inv[:, k], D[:, k - 1])
+        T_inv = _mul_soa(D[:, 0], A_inv[:, 0], w("T_inv", (ns, 4, 4, n)))
+        if not jacobian:
+            return T_inv, None
+        # Column k of the LOCAL Jacobian: Ad(D_k) S_k = [R v + p x (R w), R w], (R, p) of D_k.
+        Y = w("Y", (ns, 6, 6, n))
+        np.matmul(self._K[sides], D.reshape(ns, 6, 16, n), out=Y)  # [R v, R w]
+        _add_cross(D[:, :, :3, 3], Y[:, :, 3:], Y[:, :, :3])
+        return T_inv, Y
+
+    def _legs_batch(self, Q: np.ndarray, sides: tuple[int, ...] = (0, 1), jacobian: bool = True):
+        """Sole poses (n_sides, N, 4, 4) in the pelvis frame and, with `jacobian`, LOCAL
+        sole Jacobians (n_sides, N, 6, 6) w.r.t. the leg's joints in leg-map order, for
+        the rows of Q (N, 12)."""
+        Q = np.asarray(Q, dtype=float)
+        sides = list(sides)
+        n = len(Q)
+        T = np.empty((len(sides), n, 4, 4))
+        J = np.empty((len(sides), n, 6, 6)) if jacobian else None
+        for a in range(0, n, self._CHUNK):
+            b = min(a + self._CHUNK, n)
+            T_inv, Y = self._chain_block(Q[a:b], sides, jacobian)
+            T[:, a:b] = _inv_soa(T_inv, self._work("T", T_inv.shape)).transpose(0, 3, 1, 2)
+            for i, s in enumerate(sides):
+                if jacobian:
+                    J[i, a:b][..., self._jac_pos[s]] = Y[i].transpose(2, 1, 0)
+        return T, J
+
+    def sole_poses_batch(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(T_BFL, T_BFR), each (N, 4, 4): the sole poses in the pelvis frame for each row
+        of Q (N, 12), batched (`sole_poses` for one posture)."""
+        T, _ = self._legs_batch(np.atleast_2d(Q), jacobian=False)
+        return T[0], T[1]
 
     # ---------------------------------------------------------------- forward
     def q_full(self, q: np.ndarray) -> np.ndarray:
@@ -118,10 +355,16 @@ class LegKinematics:
         return self._rel(self.imu_frame)
 
     @cached_property
+    def T_BI(self) -> np.ndarray:
+        """(4, 4) pose of the (nominal) IMU frame in the pelvis frame. The IMU is on no leg
+        (checked when the model is loaded), so it does not depend on the leg angles."""
+        return self.imu_pose(np.zeros(12)).homogeneous
+
+    @cached_property
     def R_BI(self) -> np.ndarray:
         """Rotation of the (nominal) IMU frame in the pelvis frame (the IMU frame's one
-        definition). The IMU is on no leg, so it does not depend on the leg angles."""
-        return self.imu_pose(np.zeros(12)).rotation.copy()
+        definition; see `T_BI`)."""
+        return self.T_BI[:3, :3].copy()
 
     def com(self, q: np.ndarray) -> np.ndarray:
         """Centre of mass of the whole robot in the pelvis frame."""
@@ -193,6 +436,62 @@ class LegKinematics:
                 raise IKError(f"posture needs joints beyond their limits: {names}")
         return q
 
+    def solve_batch(self, T_B_left: np.ndarray, T_B_right: np.ndarray, q_init: np.ndarray | None = None,
+                    check_limits: bool = True, max_iter: int = 50) -> np.ndarray:
+        """`solve` for N targets at once: T_B_left, T_B_right (N, 4, 4) sole poses in the
+        pelvis frame (or sequences of pin.SE3), q_init (N, 12) or (12,) (default
+        `q_init()`); returns (N, 12).
+
+        Each frame runs `solve_leg`'s Newton iteration (error log6(T^-1 T_target) in the
+        sole frame, least-squares step on the LOCAL sole Jacobian, at most 0.5 rad a
+        step, until the error is below IK_TOL), all frames in parallel. Raises IKError
+        naming the frames (indices also in the error's `frames`) that do not converge or,
+        with `check_limits`, that need joints beyond their limits."""
+        targets = [_homogeneous(T) for T in (T_B_left, T_B_right)]
+        n = len(targets[0])
+        if len(targets[1]) != n:
+            raise ValueError(f"solve_batch: {n} left but {len(targets[1])} right sole poses")
+        q0 = self.q_init() if q_init is None else np.asarray(q_init, dtype=float)
+        q = np.array(np.broadcast_to(q0, (n, 12)), dtype=float)
+        for i, side in enumerate(SIDES):
+            residual = self._newton_batch(i, targets[i], q, max_iter)
+            failed = np.flatnonzero(residual > 1e-9)
+            if failed.size:
+                raise _ik_error(f"{side} sole pose not reachable in {failed.size} of {n} frames "
+                                f"(largest residual {residual[failed].max():.2e})", failed)
+        if check_limits:
+            bad = (q < self.q_lower - 1e-9) | (q > self.q_upper + 1e-9)
+            frames = np.flatnonzero(bad.any(axis=1))
+            if frames.size:
+                detail = "; ".join(f"frame {k}: {[self.legmap.joint_names[j] for j in np.flatnonzero(bad[k])]}"
+                                   for k in frames[:5])
+                more = f"; ... ({frames.size} frames)" if frames.size > 5 else ""
+                raise _ik_error(f"postures need joints beyond their limits: {detail}{more}", frames)
+        return q
+
+    def _newton_batch(self, side: int, target: np.ndarray, q: np.ndarray, max_iter: int) -> np.ndarray:
+        """Solves leg `side` of every row of q in place; returns each frame's last error norm."""
+        n = len(q)
+        cols = self.leg_cols[SIDES[side]]
+        err_norm = np.full(n, np.inf)
+        active = np.arange(n)
+        for _ in range(max_iter):
+            if active.size == 0:
+                break
+            qa = q[active]
+            T, J = self._legs_batch(qa, (side,))
+            err = Log(inverse(T[0]) @ target[active])
+            norm = np.linalg.norm(err, axis=1)
+            err_norm[active] = norm
+            go = norm >= self.IK_TOL
+            active, J, err, qa = active[go], J[0][go], err[go], qa[go]
+            if active.size == 0:
+                break
+            step = _lstsq_batch(J, err)
+            scale = np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))  # at most 0.5 rad a step
+            q[np.ix_(active, cols)] = qa[:, cols] + scale[:, None] * step
+        return err_norm
+
     def q_init(self) -> np.ndarray:
         """A mildly bent-knee seed in the middle of the joint ranges (IK starting point)."""
         q = np.clip(np.zeros(12), self.q_lower, self.q_upper)
@@ -213,6 +512,66 @@ class LegKinematics:
             sole_length=float(c[:, 0].max() - c[:, 0].min()),
             sole_width=float(c[:, 1].max() - c[:, 1].min()),
         )
+
+
+def _homogeneous(T) -> np.ndarray:
+    """(N, 4, 4) from an (N, 4, 4) or (4, 4) array, a pin.SE3 or a sequence of them."""
+    if isinstance(T, pin.SE3):
+        return T.homogeneous[None]
+    if len(T) and isinstance(T[0], pin.SE3):
+        return np.array([t.homogeneous for t in T])
+    return np.asarray(T, dtype=float).reshape(-1, 4, 4)
+
+
+def _ik_error(message: str, frames: np.ndarray) -> IKError:
+    shown = ", ".join(str(k) for k in frames[:20]) + (", ..." if len(frames) > 20 else "")
+    err = IKError(f"{message}; frames [{shown}]")
+    err.frames = frames
+    return err
+
+
+def _lstsq_batch(J: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise np.linalg.lstsq(J[k], b[k], rcond=None)[0] for square J: a plain solve
+    where J[k] is well conditioned; where the solve fails or amplifies b by more than
+    1e6 (relative to |J|), the minimum-norm solution through the SVD with singular
+    values below eps * max(m, n) * s_max dropped (lstsq's rule)."""
+    try:
+        x = np.linalg.solve(J, b[..., None])[..., 0]
+        amplified = np.linalg.norm(x, axis=1) * np.linalg.norm(J, axis=(1, 2)) > 1e6 * np.linalg.norm(b, axis=1)
+        bad = ~np.isfinite(x).all(axis=1) | amplified
+    except np.linalg.LinAlgError:  # an exactly singular J somewhere
+        x, bad = np.empty_like(b), np.ones(len(b), dtype=bool)
+    if bad.any():
+        U, s, Vt = np.linalg.svd(J[bad])
+        cutoff = np.finfo(float).eps * max(J.shape[-2:]) * s[:, :1]
+        inv_s = np.where(s > cutoff, 1.0 / np.where(s > cutoff, s, 1.0), 0.0)
+        x[bad] = np.einsum("nji,nj->ni", Vt, inv_s * np.einsum("nji,nj->ni", U, b[bad]))
+    return x
+
+
+def _mul_soa(A: np.ndarray, B: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Products of stacks of matrices stored frame-last: (..., i, j, n) @ (..., j, k, n)."""
+    return np.einsum("...ijn,...jkn->...ikn", A, B, out=out)
+
+
+def _inv_soa(H: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """Inverses of homogeneous transforms stored frame-last, (..., 4, 4, n)."""
+    R, p = H[..., :3, :3, :], H[..., :3, 3, :]
+    out[..., :3, :3, :] = np.swapaxes(R, -3, -2)
+    np.einsum("...rcn,...rn->...cn", R, p, out=out[..., :3, 3, :])
+    np.negative(out[..., :3, 3, :], out=out[..., :3, 3, :])
+    out[..., 3, :3, :] = 0.0
+    out[..., 3, 3, :] = 1.0
+    return out
+
+
+def _add_cross(p: np.ndarray, a: np.ndarray, out: np.ndarray) -> None:
+    """out += p x a for 3-vectors along axis -2 (frame-last arrays)."""
+    px, py, pz = p[..., 0, :], p[..., 1, :], p[..., 2, :]
+    ax, ay, az = a[..., 0, :], a[..., 1, :], a[..., 2, :]
+    out[..., 0, :] += py * az - pz * ay
+    out[..., 1, :] += pz * ax - px * az
+    out[..., 2, :] += px * ay - py * ax
 
 
 def solve_standing(kin: LegKinematics, T_W_left: pin.SE3, T_W_right: pin.SE3, posture0: np.ndarray,
@@ -275,29 +634,32 @@ class FrameKinematics:
 
 
 def frame_kinematics(kin: LegKinematics, Q: np.ndarray) -> FrameKinematics:
-    """Pinocchio forward kinematics and sole Jacobians for each row of Q (N, 12); the
-    per-frame loop only calls Pinocchio, the algebra on its outputs is batched.
+    """Forward kinematics and sole Jacobians for each row of Q (N, 12), all frames at
+    once on the legs' products of exponentials (`LegPoE`).
 
     A right perturbation of the sole poses, T_BF(q + d) = T_BF Exp(J_F d), perturbs C
     on the right by G d with G = [-Ad(C^-1) J_L | J_R]."""
-    m, d = kin.model, kin.data
-    fL, fR, fB = kin.sole_frame["left"], kin.sole_frame["right"], kin.pelvis_frame
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
     n = len(Q)
-    HB, HL, HR = np.empty((n, 4, 4)), np.empty((n, 4, 4)), np.empty((n, 4, 4))
-    JLf, JRf = np.empty((n, 6, m.nv)), np.empty((n, 6, m.nv))
-    qf = kin.q_neutral.copy()
-    for k in range(n):
-        qf[kin.leg_q_idx] = Q[k]
-        pin.computeJointJacobians(m, d, qf)
-        pin.updateFramePlacements(m, d)
-        HB[k], HL[k], HR[k] = d.oMf[fB].homogeneous, d.oMf[fL].homogeneous, d.oMf[fR].homogeneous
-        JLf[k] = pin.getFrameJacobian(m, d, fL, pin.LOCAL)
-        JRf[k] = pin.getFrameJacobian(m, d, fR, pin.LOCAL)
-    Binv = inverse(HB)
-    TL, TR = Binv @ HL, Binv @ HR
-    C = inverse(TL) @ TR
-    J_L, J_R = JLf[:, :, kin.leg_v_idx[:6]], JRf[:, :, kin.leg_v_idx[6:]]
-    G = np.empty((n, 6, 12))
-    G[:, :, :6] = -adjoint(inverse(C)) @ J_L
-    G[:, :, 6:] = J_R
-    return FrameKinematics(C, G, TL[:, :3, 3], TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], J_L, J_R)
+    T, C, G = np.empty((2, n, 4, 4)), np.empty((n, 4, 4)), np.empty((n, 6, 12))
+    J = np.empty((2, n, 6, 6))
+    pos_L, pos_R = kin._jac_pos
+    w = kin._work
+    for a in range(0, n, kin._CHUNK):
+        b = min(a + kin._CHUNK, n)
+        T_inv, Y = kin._chain_block(Q[a:b], [0, 1], True)
+        Tb = _inv_soa(T_inv, w("T", T_inv.shape))
+        T[:, a:b] = Tb.transpose(0, 3, 1, 2)
+        J[0, a:b][..., pos_L] = Y[0].transpose(2, 1, 0)
+        J[1, a:b][..., pos_R] = Y[1].transpose(2, 1, 0)
+        C[a:b] = _mul_soa(T_inv[0], Tb[1], w("C", Tb.shape[1:])).transpose(2, 0, 1)
+        # -Ad(C^-1) J_L, column by column: -[R a + p x (R b), R b] with (R, p) of C^-1.
+        C_inv = _mul_soa(T_inv[1], Tb[0], w("C_inv", Tb.shape[1:]))
+        AdJ = w("AdJ", Y.shape[1:])  # (6 joints, 6, n)
+        np.einsum("ijn,kjn->kin", C_inv[:3, :3], Y[0, :, :3], out=AdJ[:, :3])
+        np.einsum("ijn,kjn->kin", C_inv[:3, :3], Y[0, :, 3:], out=AdJ[:, 3:])
+        _add_cross(C_inv[None, :3, 3], AdJ[:, 3:], AdJ[:, :3])
+        G[a:b, :, pos_L] = -AdJ.transpose(2, 1, 0)
+        G[a:b, :, 6 + pos_R] = Y[1].transpose(2, 1, 0)
+    TL, TR = T
+    return FrameKinematics(C, G, TL[:, :3, 3], TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], J[0], J[1])

@@ -20,6 +20,12 @@ reads the offsets, the offsets strain the closed chain as on a real robot.
 
 In the straight-leg standing phase each true knee sits at the simulated robot's
 mechanical straight angle plus `knee_straight_error_rad`, and postures are ignored.
+
+Two ways to drive it, with the same physics and the same random-number stream:
+`step` / `observe` / `truth` one frame at a time (the env), or `run` for a whole
+posture sequence (the collector), which takes the sequence's IK solved in one batch
+(`posture_ik`) and converts the ground truth once at the end. `truth` is `run`'s
+conversion applied to one frame.
 """
 
 from __future__ import annotations
@@ -29,13 +35,27 @@ import numpy as np
 import pinocchio as pin
 
 from legcal_bench.errors import IKError, LegMapError
-from legcal_bench.geometry.poses import posture_pose, se3, se3_to_pos_quat
+from legcal_bench.geometry.lie import Log, inverse
+from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.scene import Scene, apply_servos, build_scene
 from legcal_bench.sim.sensors import SensorModel
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
+
+
+def posture_ik(kin: LegKinematics, left: pin.SE3, right: pin.SE3, postures: np.ndarray,
+               q_init: np.ndarray | None = None) -> np.ndarray:
+    """Closed-chain IK (within joint limits) of each posture (N, 6) with the soles at
+    `left`/`right` (stance frame): (N, 12), in one batch (`kin.solve_batch`). The first
+    frame starts from `q_init` (default `kin.q_init()`), the others from its solution, as
+    a sequence of `kin.solve` calls starts each from a nearby one. Raises IKError with
+    the failing frames in `.frames`."""
+    T_BW = inverse(posture_poses(postures))
+    T_left, T_right = T_BW @ left.homogeneous, T_BW @ right.homogeneous
+    q0 = kin.solve_batch(T_left[:1], T_right[:1], q_init)[0]
+    return kin.solve_batch(T_left, T_right, q0)  # frame 0 is already solved: it stays q0
 
 
 class DoubleSupportSim:
@@ -66,6 +86,15 @@ class DoubleSupportSim:
         self.scene: Scene | None = build_scene(self.sim_legmap, mode, physics_dt) if mode != "kinematic" else None
         self.data = mujoco.MjData(self.scene.model) if self.scene else None
         self.has_ft = bool(self.scene and self.scene.has_ft)
+        if self.scene is not None:
+            sc, adr = self.scene, self.scene.sensor_adr
+            self._substep_frac = (np.arange(1, self.n_substeps + 1) / self.n_substeps)[:, None]
+            self._imu_adr = np.r_[adr["imu_acc"]:adr["imu_acc"] + 3, adr["imu_gyro"]:adr["imu_gyro"] + 3]
+            self._ft_adr = (np.array([np.r_[adr[f"{s}_force"]:adr[f"{s}_force"] + 3,
+                                            adr[f"{s}_torque"]:adr[f"{s}_torque"] + 3] for s in SIDES])
+                            if self.has_ft else None)
+            self._sole_sites = np.array([sc.sole_site[s] for s in SIDES])
+        self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
         self.left = self.right = None
         self.standing = False
 
@@ -93,60 +122,89 @@ class DoubleSupportSim:
         self._q_cmd = q_true - self.offsets if standing else self._ik(self.nominal, self._posture, q_true)
         self._q_true = q_true
         if self.mode == "kinematic":
-            self._imu_hist = [self._imu_world(q_true, self._posture)] * 2
+            self._R_WB = posture_pose(self._posture).rotation
+            R_WI = self._R_WB @ self._R_BI
+            self._imu_R = (R_WI, R_WI)
+            self._imu_true = self._kinematic_imu()
         else:
             self._reset_physics(q_true)
-        self._sole_ref = self._sole_poses_world()
         self.reachable = True
+        self._sole_ref = self._world_poses(self._snapshot(1))[0][0]  # sole drift is measured from here
 
-    def step(self, posture: np.ndarray) -> bool:
+    def step(self, posture: np.ndarray, q_cmd: np.ndarray | None = None, q_true: np.ndarray | None = None) -> bool:
         """Move to `posture` over one logging period; False if it was out of reach (the
-        previous posture is held)."""
-        self.reachable = True
-        if not self.standing:
-            try:
-                q_cmd = self._ik(self.nominal, posture, self._q_cmd)
-                q_true = self._ik(self.true_kin, posture, self._q_true) if self.mode == "kinematic" else None
-                self._posture, self._q_cmd = np.array(posture, dtype=float), q_cmd
-                if q_true is not None:
-                    self._q_true = q_true
-            except IKError:
-                self.reachable = False
-        if self.mode == "kinematic":
-            self._imu_hist = self._imu_hist[1:] + [self._imu_world(self._q_true, self._posture)]
-        else:
-            self._advance_physics()
-        self.time += self.dt
-        return self.reachable
+        previous posture is held). `q_cmd` is the posture's nominal IK solution and (in
+        kinematic mode) `q_true` the simulated robot's, if already known (`posture_ik`);
+        otherwise `step` solves them, starting from the current ones."""
+        return self._step(np.array(posture, dtype=float), q_cmd, q_true, None)
 
     def observe(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """What the robot logs now: encoder angles, IMU specific force and rate (and
-        ankle force/torque where the scene has them), with the sensor model's errors."""
+        ankle force/torque where the scene has them), with the sensor model's errors.
+        Random draws, in order: IMU, encoders, force/torque."""
         acc, gyro = self._true_imu()
         acc, gyro = self.sensor.imu(acc, gyro, rng)
         obs = {"q_enc": self.sensor.encoders(self._q_true - self.offsets, rng), "imu_acc": acc, "imu_gyro": gyro}
         if self.has_ft:
-            obs["ft"] = self.sensor.force_torque(self._wrenches(), rng)
+            obs["ft"] = self.sensor.force_torque(self.data.sensordata[self._ft_adr], rng)
         return obs
 
     def truth(self) -> dict:
         """The ground truth now (never given to calibrators)."""
-        soles = self._sole_poses_world()
-        drift = [self._sole_ref[i].actInv(soles[i]) for i in range(2)]
-        acc, gyro = self._true_imu()
-        return {
-            "time": self.time,
-            "q_true": self._q_true.copy(),
-            "offsets": self.offsets.copy(),
-            "posture": self._posture.copy(),
-            "posture_reachable": self.reachable,
-            "sole_poses_world": np.array([se3_to_pos_quat(T) for T in soles]),
-            "pelvis_pose_world": se3_to_pos_quat(self._pelvis_pose_world()),
-            "sole_drift_m": np.array([np.linalg.norm(D.translation) for D in drift]),
-            "sole_drift_rad": np.array([np.linalg.norm(pin.log3(D.rotation)) for D in drift]),
-            "imu_true_acc": acc,
-            "imu_true_gyro": gyro,
-        }
+        buf = self._snapshot(1)
+        tr = {k: v[0] for k, v in self._truth(buf).items()}
+        tr["time"], tr["posture_reachable"] = float(tr["time"]), bool(tr["posture_reachable"])
+        return tr
+
+    def solve_postures(self, postures: np.ndarray, kin: LegKinematics | None = None) -> np.ndarray:
+        """`posture_ik` for the current soles with `kin` (default the nominal model),
+        starting from the current solution: (N, 12), a row of NaN for each posture out of
+        reach or past a joint limit (which `step` then reports as unreachable)."""
+        kin = self.nominal if kin is None else kin
+        postures = np.asarray(postures, dtype=float).reshape(-1, 6)
+        q = np.full((len(postures), 12), np.nan)
+        todo = np.arange(len(postures))
+        start = self._q_true if kin is self.true_kin else self._q_cmd
+        while todo.size:
+            try:
+                q[todo] = posture_ik(kin, self.left, self.right, postures[todo], start)
+                break
+            except IKError as e:
+                todo = np.delete(todo, e.frames)
+        return q
+
+    def run(self, postures: np.ndarray, rng: np.random.Generator, q_cmd: np.ndarray | None = None,
+            q_true: np.ndarray | None = None, progress=None) -> tuple[dict, dict]:
+        """`step` through `postures` (N, 6), observing after each: (observations, ground
+        truth), each stacked over the N frames: what `step`, `observe` and `truth` give
+        frame by frame, with the same random draws (equal to rounding: batched and
+        sequential IK agree to ~1e-13). `q_cmd` (N, 12) is the postures' nominal IK
+        (`posture_ik`; rows of NaN are solved by `step`); in kinematic mode the simulated
+        robot's IK is solved here in one batch (or taken from `q_cmd` when the simulated
+        robot is the nominal one)."""
+        postures = np.asarray(postures, dtype=float).reshape(-1, 6)
+        n = len(postures)
+        kinematic = self.mode == "kinematic"
+        R_WB = posture_poses(postures)[:, :3, :3] if kinematic else None
+        if kinematic and q_true is None and not self.standing:
+            q_true = q_cmd if q_cmd is not None and self.true_kin is self.nominal else \
+                self.solve_postures(postures, self.true_kin)
+        has_cmd = None if q_cmd is None else ~np.isnan(q_cmd).any(axis=1)
+        has_true = None if q_true is None else ~np.isnan(q_true).any(axis=1)
+        obs = {"q_enc": np.empty((n, 12)), "imu_acc": np.empty((n, 3)), "imu_gyro": np.empty((n, 3))}
+        if self.has_ft:
+            obs["ft"] = np.empty((n, 2, 6))
+        buf = self._buffers(n)
+        for i in range(n):
+            self._step(postures[i].copy(), q_cmd[i] if has_cmd is not None and has_cmd[i] else None,
+                       q_true[i] if has_true is not None and has_true[i] else None,
+                       R_WB[i] if kinematic else None)
+            for k, v in self.observe(rng).items():
+                obs[k][i] = v
+            self._record(buf, i)
+            if progress is not None:
+                progress.update(1)
+        return obs, self._truth(buf)
 
     def render_scene(self, physics_dt: float) -> tuple[mujoco.MjModel, mujoco.MjData, np.ndarray]:
         """(model, data, pelvis position) posed for rendering; kinematic mode builds a
@@ -164,6 +222,31 @@ class DoubleSupportSim:
         T_WB = posture_pose(posture)
         return kin.solve(T_WB.actInv(self.left), T_WB.actInv(self.right), q_init)
 
+    def _step(self, posture: np.ndarray, q_cmd, q_true, R_WB) -> bool:
+        """`step` (posture already a fresh float array); `R_WB`, the posture's rotation
+        if known (kinematic mode)."""
+        self.reachable = True
+        kinematic = self.mode == "kinematic"
+        if not self.standing:
+            try:
+                if q_cmd is None:
+                    q_cmd = self._ik(self.nominal, posture, self._q_cmd)
+                if kinematic and q_true is None:
+                    q_true = self._ik(self.true_kin, posture, self._q_true)
+                self._posture, self._q_cmd = posture, np.array(q_cmd, dtype=float)
+                if kinematic:
+                    self._q_true = np.array(q_true, dtype=float)
+                    self._R_WB = posture_pose(posture).rotation if R_WB is None else R_WB
+            except IKError:
+                self.reachable = False
+        if kinematic:
+            self._imu_R = (self._imu_R[1], self._R_WB @ self._R_BI)
+            self._imu_true = self._kinematic_imu()
+        else:
+            self._advance_physics()
+        self.time += self.dt
+        return self.reachable
+
     def _set_state(self, q_true: np.ndarray, T_WB: pin.SE3) -> None:
         sc, d = self.scene, self.data
         a = sc.free_qpos_adr
@@ -177,6 +260,14 @@ class DoubleSupportSim:
         # against the mechanism), so its servo target is the true straight-leg posture.
         return self._q_stand if self.standing else self._q_cmd + self.offsets
 
+    def _drive(self, targets: np.ndarray) -> None:
+        """One physics step per row of `targets` (joint-space servo targets)."""
+        sc, d, mj_step = self.scene, self.data, mujoco.mj_step
+        m = sc.model
+        for target in targets:
+            apply_servos(sc, d, target)
+            mj_step(m, d)
+
     def _reset_physics(self, q_true: np.ndarray) -> None:
         sc, d = self.scene, self.data
         mujoco.mj_resetData(sc.model, d)
@@ -187,51 +278,88 @@ class DoubleSupportSim:
                 d.mocap_pos[sc.mocap[side]], d.mocap_quat[sc.mocap[side]] = pq[:3], pq[3:]
         mujoco.mj_forward(sc.model, d)
         # The servos start at the true posture and blend to their (strained) targets
-        # over most of the settle time: a step would jolt the robot off its feet.
+        # over most of the settle time (smoothstep): a step would jolt the robot off its feet.
         self._target = self._servo_target()
         n = int(round(self.settle_s / self.physics_dt))
-        for i in range(n):
-            s = min(1.0, (i + 1) / max(1, int(0.7 * n)))
-            apply_servos(sc, d, q_true + (s * s * (3 - 2 * s)) * (self._target - q_true))
-            mujoco.mj_step(sc.model, d)
+        s = np.minimum(1.0, np.arange(1, n + 1) / max(1, int(0.7 * n)))[:, None]
+        self._drive(q_true + (s * s * (3 - 2 * s)) * (self._target - q_true))
 
     def _advance_physics(self) -> None:
         sc, d = self.scene, self.data
         start, end = self._target, self._servo_target()
-        for i in range(1, self.n_substeps + 1):
-            apply_servos(sc, d, start + (end - start) * (i / self.n_substeps))
-            mujoco.mj_step(sc.model, d)
+        self._drive(start + (end - start) * self._substep_frac)  # linear over the logging period
         self._target = end
-        self._q_true = d.qpos[sc.qpos_adr].copy()
+        self._q_true = d.qpos[sc.qpos_adr]
 
-    def _imu_world(self, q_true: np.ndarray, posture: np.ndarray) -> pin.SE3:
-        return posture_pose(posture) * self.true_kin.imu_pose(q_true)
+    def _kinematic_imu(self) -> tuple[np.ndarray, np.ndarray]:
+        # Each frame is a static posture (quasi-static), so the accelerometer reads
+        # gravity alone; the rate is the backward difference.
+        R1, R2 = self._imu_R
+        return R2.T @ (-GRAVITY), pin.log3(R1.T @ R2) / self.dt
 
     def _true_imu(self) -> tuple[np.ndarray, np.ndarray]:
         """Specific force and angular rate in the IMU frame."""
+        if self.mode == "kinematic":
+            return self._imu_true[0].copy(), self._imu_true[1].copy()
+        imu = self.data.sensordata[self._imu_adr]
+        return imu[:3], imu[3:]
+
+    # ------------------------------------------------------------ ground truth
+    # A frame's raw state goes into preallocated arrays (`_record`); `_truth` converts
+    # any number of frames at once (poses to [x y z qw qx qy qz], sole drift).
+    def _buffers(self, n: int) -> dict[str, np.ndarray]:
+        buf = {"time": np.empty(n), "q_true": np.empty((n, 12)), "posture": np.empty((n, 6)),
+               "posture_reachable": np.empty(n, dtype=bool), "imu_true_acc": np.empty((n, 3)),
+               "imu_true_gyro": np.empty((n, 3))}
         if self.mode != "kinematic":
-            sd, adr = self.data.sensordata, self.scene.sensor_adr
-            return sd[adr["imu_acc"]:adr["imu_acc"] + 3].copy(), sd[adr["imu_gyro"]:adr["imu_gyro"] + 3].copy()
-        # Kinematic mode: each frame is a static posture (quasi-static), so the
-        # accelerometer reads gravity alone; the rate is the backward difference.
-        T1, T2 = self._imu_hist
-        gyro = pin.log3(T1.rotation.T @ T2.rotation) / self.dt
-        return T2.rotation.T @ (-GRAVITY), gyro
+            buf.update(sole_pos=np.empty((n, 2, 3)), sole_rot=np.empty((n, 2, 9)),
+                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)))
+        return buf
 
-    def _wrenches(self) -> np.ndarray:
-        sd, adr = self.data.sensordata, self.scene.sensor_adr
-        return np.array([np.concatenate([sd[adr[f"{s}_force"]:adr[f"{s}_force"] + 3],
-                                         sd[adr[f"{s}_torque"]:adr[f"{s}_torque"] + 3]]) for s in SIDES])
+    def _record(self, buf: dict[str, np.ndarray], i: int) -> None:
+        buf["time"][i] = self.time
+        buf["q_true"][i] = self._q_true
+        buf["posture"][i] = self._posture
+        buf["posture_reachable"][i] = self.reachable
+        buf["imu_true_acc"][i], buf["imu_true_gyro"][i] = self._true_imu()
+        if self.mode != "kinematic":
+            d, b = self.data, self.scene.pelvis_body
+            buf["sole_pos"][i] = d.site_xpos[self._sole_sites]
+            buf["sole_rot"][i] = d.site_xmat[self._sole_sites]
+            buf["pelvis_pos"][i] = d.xpos[b]
+            buf["pelvis_rot"][i] = d.xmat[b]
 
-    def _sole_poses_world(self) -> list[pin.SE3]:
+    def _snapshot(self, n: int) -> dict[str, np.ndarray]:
+        buf = self._buffers(n)
+        self._record(buf, 0)
+        return buf
+
+    def _world_poses(self, buf: dict[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """(sole poses (N, 2, 4, 4), pelvis poses (N, 4, 4)) in the world (stance) frame."""
         if self.mode == "kinematic":
-            T_WB = posture_pose(self._posture)
-            return [T_WB * T for T in self.true_kin.sole_poses(self._q_true)]
-        d, sc = self.data, self.scene
-        return [se3(d.site_xmat[sc.sole_site[s]].reshape(3, 3), d.site_xpos[sc.sole_site[s]]) for s in SIDES]
+            T_WB = posture_poses(buf["posture"])
+            T_left, T_right = self.true_kin.sole_poses_batch(buf["q_true"])
+            return T_WB[:, None] @ np.stack([T_left, T_right], axis=1), T_WB
+        n = len(buf["time"])
+        soles, pelvis = np.zeros((n, 2, 4, 4)), np.zeros((n, 4, 4))
+        soles[..., :3, :3], soles[..., :3, 3], soles[..., 3, 3] = buf["sole_rot"].reshape(n, 2, 3, 3), buf["sole_pos"], 1
+        pelvis[:, :3, :3], pelvis[:, :3, 3], pelvis[:, 3, 3] = buf["pelvis_rot"].reshape(n, 3, 3), buf["pelvis_pos"], 1
+        return soles, pelvis
 
-    def _pelvis_pose_world(self) -> pin.SE3:
-        if self.mode == "kinematic":
-            return posture_pose(self._posture)
-        b = self.scene.pelvis_body
-        return se3(self.data.xmat[b].reshape(3, 3), self.data.xpos[b])
+    def _truth(self, buf: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        soles, pelvis = self._world_poses(buf)
+        drift = inverse(self._sole_ref) @ soles  # each sole relative to its pose at reset
+        n = len(buf["time"])
+        return {
+            "time": buf["time"],
+            "q_true": buf["q_true"],
+            "offsets": np.tile(self.offsets, (n, 1)),
+            "posture": buf["posture"],
+            "posture_reachable": buf["posture_reachable"],
+            "sole_poses_world": homogeneous_to_pos_quat(soles),
+            "pelvis_pose_world": homogeneous_to_pos_quat(pelvis),
+            "sole_drift_m": np.linalg.norm(drift[..., :3, 3], axis=-1),
+            "sole_drift_rad": np.linalg.norm(Log(drift)[..., 3:], axis=-1),
+            "imu_true_acc": buf["imu_true_acc"],
+            "imu_true_gyro": buf["imu_true_gyro"],
+        }

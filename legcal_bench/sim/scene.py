@@ -20,6 +20,7 @@ from dm_control import mjcf
 from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import ConfigError, LegMapError
+from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -67,7 +68,7 @@ def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, e
     if spec.site is not None:
         site = _find(model, "site", spec.site, where)
         body, pos, rot = site.parent, np.asarray(site.pos if site.pos is not None else np.zeros(3), float), (
-            Rotation.from_quat(np.roll(site.quat, -1)) if site.quat is not None else Rotation.identity())
+            from_wxyz(site.quat) if site.quat is not None else Rotation.identity())
         if extra is None:
             return site.name
     else:
@@ -75,7 +76,7 @@ def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, e
         pos, rot = np.asarray(spec.pos, float), Rotation.from_euler("xyz", spec.rpy)
     if extra is not None:
         pos = pos + rot.apply(extra)
-    body.add("site", name=name, pos=pos.tolist(), quat=np.roll(rot.as_quat(), 1).tolist(), size=[0.006],
+    body.add("site", name=name, pos=pos.tolist(), quat=wxyz(rot).tolist(), size=[0.006],
              rgba=[0.9, 0.3, 0.2, 1], group=3)
     return name
 
@@ -193,12 +194,25 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
 
 def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
     """Drive the leg joints toward `target` (joint space): position actuators take the
-    target as ctrl; torque motors get the leg map's PD law."""
-    pa = scene.position_act >= 0
-    data.ctrl[scene.position_act[pa]] = target[pa]
-    ma = scene.motor_act >= 0
-    if ma.any():
-        q = data.qpos[scene.qpos_adr[ma]]
-        qd = data.qvel[scene.dof_adr[ma]]
-        tau = scene.servo_kp[ma] * (target[ma] - q) - scene.servo_kd[ma] * qd
-        data.ctrl[scene.motor_act[ma]] = tau / scene.motor_gear[ma]
+    target as ctrl; torque motors get the leg map's PD law. It runs before every physics
+    step, so which joints have which actuator is worked out on the first call and kept
+    on the scene."""
+    servo = getattr(scene, "_servo_index", None)
+    if servo is None:
+        pa, ma = scene.position_act >= 0, scene.motor_act >= 0
+        act, cols = scene.position_act[pa], np.flatnonzero(pa)
+        # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + 12] = target.
+        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + 12))
+        servo = scene._servo_index = (
+            slice(int(act[0]), int(act[0]) + 12) if contiguous else act, None if contiguous else cols,
+            (scene.motor_act[ma], np.flatnonzero(ma), scene.qpos_adr[ma], scene.dof_adr[ma], scene.servo_kp[ma],
+             scene.servo_kd[ma], scene.motor_gear[ma]) if ma.any() else None)
+    pos_act, pos_cols, motors = servo
+    if pos_cols is None:
+        data.ctrl[pos_act] = target
+    elif len(pos_cols):
+        data.ctrl[pos_act] = target[pos_cols]
+    if motors is not None:
+        act, cols, qadr, vadr, kp, kd, gear = motors
+        tau = kp * (target[cols] - data.qpos[qadr]) - kd * data.qvel[vadr]
+        data.ctrl[act] = tau / gear

@@ -8,6 +8,7 @@ specific force and angular rate in the nominal IMU frame, rotated into the actua
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -38,9 +39,9 @@ class SensorModel:
             raise SensorModelError(f"sensor model: unknown fields {sorted(unknown)}; known: {sorted(known)}")
         return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
 
-    @property
+    @cached_property
     def mount_rotation(self) -> np.ndarray:
-        """Rotation of the actual IMU frame in the nominal IMU frame."""
+        """Rotation of the actual IMU frame in the nominal IMU frame (computed once)."""
         return Rotation.from_euler("xyz", self.imu_mount_rpy).as_matrix()
 
     def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator) -> np.ndarray:

@@ -1,0 +1,187 @@
+"""The residual terms calibrators assemble into a `Problem`.
+
+Inter-foot method (the paper's objective, one pair of terms per contact segment):
+  InterFootTerm   sqrt(l_f) W (Log(M_s^-1 C_k)), M_s the segment's Fréchet mean
+  FlatGroundTerm  sqrt(l_g) W [p_Lz - p_Rz, z_Lx, z_Ly, z_Rx, z_Ry] in the IMU-levelled frame
+  TikhonovTerm    sqrt(l_q) W_q . dq                    (prior: curvature, not information)
+  KneePriorTerm   sqrt(l_knee) (dq_knee - dq_knee_prior) (prior)
+Yamane's method (per frame: a root roll and pitch, plus the shared offsets):
+  SoleHeightTerm  w_h (z_kv - mean_v z_kv) over the eight sole corners
+  ImuTiltTerm     w_imu (R_k^T e_z - u_k)
+
+Terms of one segment share its batched kinematics through a `SegmentKinematics`, so
+forward kinematics runs once per segment and offsets value.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from legcal_bench.estimation.problem import Term
+from legcal_bench.estimation.residuals import feet_residuals, flat_residuals
+from legcal_bench.geometry.lie import frechet_mean
+from legcal_bench.robots.kinematics import FrameKinematics, LegKinematics, frame_kinematics
+
+OFFSETS = "offsets"
+TILT = "tilt"  # Yamane's per-frame root roll and pitch
+
+
+class SegmentKinematics:
+    """A segment's encoder frames and their kinematics at the offsets last asked for."""
+
+    def __init__(self, kin: LegKinematics, q_enc: np.ndarray):
+        self.kin, self.q_enc = kin, q_enc
+        self._dq: np.ndarray | None = None
+        self._fk: FrameKinematics | None = None
+
+    def at(self, dq: np.ndarray) -> FrameKinematics:
+        if self._dq is None or not np.array_equal(self._dq, dq):
+            self._fk = frame_kinematics(self.kin, self.q_enc + dq)
+            self._dq = np.array(dq, copy=True)
+        return self._fk
+
+    def __len__(self) -> int:
+        return len(self.q_enc)
+
+
+class InterFootTerm(Term):
+    """Contact consistency of one segment: 6 rows per frame, (translation, rotation).
+
+    mode "projected": the mean is re-estimated with the offsets (variable projection;
+    the Jacobian includes dM/d dq); "fixed": the mean is held (`update_mean` sets it),
+    as in the paper's alternation."""
+
+    blocks = (OFFSETS,)
+
+    def __init__(self, name: str, seg: SegmentKinematics, weights: np.ndarray, mode: str = "projected"):
+        self.name, self.seg, self.w, self.mode = name, seg, np.asarray(weights, dtype=float), mode
+        self.mean: np.ndarray | None = None
+
+    def update_mean(self, dq: np.ndarray) -> np.ndarray:
+        self.mean = frechet_mean(self.seg.at(dq).C, self.mean, tol=1e-15)
+        return self.mean
+
+    def compute(self, x):
+        dq = x[OFFSETS]
+        fk = self.seg.at(dq)
+        if self.mode == "projected":
+            self.update_mean(dq)
+        r, J = feet_residuals(fk.C, fk.G, self.mean, self.mode)
+        return (self.w * r).ravel(), {OFFSETS: (self.w[:, None] * J).reshape(-1, 12)}
+
+
+class FlatGroundTerm(Term):
+    """Flat ground against the IMU vertical: 5 rows per frame."""
+
+    blocks = (OFFSETS,)
+
+    def __init__(self, name: str, seg: SegmentKinematics, up_B: np.ndarray, R_WB: np.ndarray, weights: np.ndarray):
+        self.name, self.seg, self.up_B, self.R_WB = name, seg, up_B, R_WB
+        self.w = np.asarray(weights, dtype=float)
+
+    def compute(self, x):
+        r, J = flat_residuals(self.seg.at(x[OFFSETS]), self.up_B, self.R_WB)
+        return (self.w * r).ravel(), {OFFSETS: (self.w[:, None] * J).reshape(-1, 12)}
+
+
+class TikhonovTerm(Term):
+    """W_q . dq, already scaled by sqrt(lambda_q): a ridge toward zero offsets."""
+
+    name = "tikhonov"
+    blocks = (OFFSETS,)
+    data = False
+
+    def __init__(self, weights: np.ndarray):
+        self.w = np.asarray(weights, dtype=float)
+
+    def compute(self, x):
+        return self.w * x[OFFSETS], {OFFSETS: np.diag(self.w)}
+
+
+class KneePriorTerm(Term):
+    """weight (dq_knee - prior): the straight-leg standing prior on the knee offsets."""
+
+    name = "knee_prior"
+    blocks = (OFFSETS,)
+    data = False
+
+    def __init__(self, knees: list[int], prior: np.ndarray, weight: float):
+        self.knees, self.prior, self.weight = list(knees), np.asarray(prior, dtype=float), float(weight)
+
+    def compute(self, x):
+        J = np.zeros((len(self.knees), 12))
+        J[np.arange(len(self.knees)), self.knees] = self.weight
+        return self.weight * (x[OFFSETS][self.knees] - self.prior), {OFFSETS: J}
+
+
+def _tilt_rotations(roll: np.ndarray, pitch: np.ndarray):
+    """R = R_y(pitch) R_x(roll) and its two partial derivatives, batched (N, 3, 3)."""
+    cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
+    n = len(roll)
+    Rx, dRx = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+    Ry, dRy = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
+    Rx[:, 0, 0] = 1
+    Rx[:, 1, 1], Rx[:, 1, 2], Rx[:, 2, 1], Rx[:, 2, 2] = cr, -sr, sr, cr
+    dRx[:, 1, 1], dRx[:, 1, 2], dRx[:, 2, 1], dRx[:, 2, 2] = -sr, -cr, cr, -sr
+    Ry[:, 1, 1] = 1
+    Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 2, 0], Ry[:, 2, 2] = cp, sp, -sp, cp
+    dRy[:, 0, 0], dRy[:, 0, 2], dRy[:, 2, 0], dRy[:, 2, 2] = -sp, cp, -cp, -sp
+    return Ry @ Rx, Ry @ dRx, dRy @ Rx
+
+
+class SoleHeightTerm(Term):
+    """Yamane's sole term: the eight corner heights, centred per frame (8 rows per frame)."""
+
+    name = "sole_heights"
+    blocks = (OFFSETS, TILT)
+    rows_per_frame = 8
+
+    def __init__(self, kin: LegKinematics, q_enc: np.ndarray, weight: float):
+        self.seg = SegmentKinematics(kin, q_enc)
+        self.n_frames, self.weight = len(q_enc), float(weight)
+        self.c = np.vstack([kin.corners["left"], kin.corners["right"]]).reshape(2, 4, 3)  # corners, sole frames
+
+    def compute(self, x):
+        n = self.n_frames
+        ang = x[TILT]
+        R, dR_roll, dR_pitch = _tilt_rotations(ang[:, 0], ang[:, 1])
+        fk = self.seg.at(x[OFFSETS])
+        # Corner positions in the pelvis frame, P = R c + p, per foot (n, 4, 3).
+        P = np.concatenate([self.c[0] @ np.swapaxes(fk.R_L, 1, 2) + fk.p_L[:, None],
+                            self.c[1] @ np.swapaxes(fk.R_R, 1, 2) + fk.p_R[:, None]], axis=1)
+        # Corner velocity: R (J_v - [c]x J_w); only its vertical component in the tilted
+        # frame matters: g = R_k^T e_z (the third row of R_k), so dz = (g^T R_foot) (J_v - [c]x J_w).
+        g = R[:, 2, :]
+        z = np.einsum("nvj,nj->nv", P, g)
+        r = self.weight * (z - z.mean(axis=1, keepdims=True))
+        Jz = np.zeros((n, 8, 12))
+        for side, (Rf, Jf) in enumerate(((fk.R_L, fk.J_L), (fk.R_R, fk.J_R))):
+            a = (g[:, None, :] @ Rf)[:, 0]  # (n, 3): e_z of the tilted frame, in the sole frame
+            # a . (J_v - c x J_w) = a . J_v - (a x c) . J_w ... as rows over the 4 corners.
+            aJv = (a[:, None, :] @ Jf[:, :3])  # (n, 1, 6)
+            axc = np.cross(a[:, None, :], self.c[side][None])  # (n, 4, 3)
+            Jz[:, 4 * side:4 * side + 4, 6 * side:6 * side + 6] = aJv - axc @ Jf[:, 3:]
+        J_dq = self.weight * (Jz - Jz.mean(axis=1, keepdims=True))
+        J_tilt = np.zeros((n, 8, 2))
+        for j, dR in enumerate((dR_roll, dR_pitch)):
+            dz = np.einsum("nvj,nj->nv", P, dR[:, 2, :])
+            J_tilt[:, :, j] = self.weight * (dz - dz.mean(axis=1, keepdims=True))
+        return r.ravel(), {OFFSETS: J_dq, TILT: J_tilt}
+
+
+class ImuTiltTerm(Term):
+    """Yamane's IMU term: the model's up vector R_k^T e_z against the IMU's (3 rows per frame)."""
+
+    name = "imu_tilt"
+    blocks = (TILT,)
+    rows_per_frame = 3
+
+    def __init__(self, up_B: np.ndarray, weight: float):
+        self.up_B, self.n_frames, self.weight = up_B, len(up_B), float(weight)
+
+    def compute(self, x):
+        ang = x[TILT]
+        R, dR_roll, dR_pitch = _tilt_rotations(ang[:, 0], ang[:, 1])
+        r = self.weight * (R[:, 2, :] - self.up_B)  # R^T e_z, as rows
+        J = np.stack([self.weight * dR[:, 2, :] for dR in (dR_roll, dR_pitch)], axis=2)  # (n, 3, 2)
+        return r.ravel(), {TILT: J}

@@ -1,0 +1,73 @@
+"""Time legcal-bench's hot paths with whatever `legcal_bench` is importable.
+
+Run as a script (`python speed_probe.py --data DIR --repeats 5`), it prints one JSON
+object: for each case the list of timings. `legcal-bench bench-speed` runs it twice,
+once on the code at hand and once on an older commit installed beside it, so both are
+timed in the same run on the same recordings. It uses only interfaces both versions
+have (calibrator registry, collection, loader, robot registry).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+import time
+
+for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_k, "1")
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+# name -> (calibrator, options, timing key): 4 stances x 450 frames (clustered straight to
+# 450, no trimming) for the solves; the default pipeline end to end.
+CALIBRATION_CASES = {
+    "interfoot_solve": ("interfoot", dict(n_max=450, trim_fraction=0.0), "solve"),
+    "interfoot_end_to_end": ("interfoot", {}, "total"),
+    "yamane_solve_default": ("yamane", dict(n_max=450), "solve"),
+    "yamane_solve_sensor": ("yamane", dict(n_max=450, weights="sensor"), "solve"),
+}
+
+
+def probe(data: str, robot: str, repeats: int, collect_repeats: int) -> dict:
+    import legcal_bench
+    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.robots import load_robot
+
+    lm = load_robot(robot)
+    recs = load_session(data, lm.joint_names)
+    out: dict = {"module": os.path.dirname(legcal_bench.__file__), "cases": {}}
+    for name, (cal, options, key) in CALIBRATION_CASES.items():
+        runs = [get_calibrator(cal, **options).calibrate(lm, recs) for _ in range(repeats)]
+        out["cases"][name] = {"unit": "s", "values": [r.timing_s[key] for r in runs],
+                              "offsets": [runs[0].offsets_rad[n] for n in lm.joint_names]}
+    for mode in ("kinematic", "weld"):
+        rates = []
+        for _ in range(collect_repeats):
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                s = collect(CollectConfig(robot=robot, mode=mode, sensors="realistic"), tmp, progress=False)
+                wall = time.perf_counter() - t0
+            frames = sum(g.frames for g in s.segments)
+            rates.append({"frames_per_s": frames / wall, "x_real_time": s.sim_s / wall})
+        out["cases"][f"collect_{mode}_frames_per_s"] = {"unit": "frames/s", "values": [r["frames_per_s"] for r in rates]}
+        out["cases"][f"collect_{mode}_x_real_time"] = {"unit": "x", "values": [r["x_real_time"] for r in rates]}
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--data", required=True, help="a weld session set (legcal-bench collect --out)")
+    p.add_argument("--robot", default="a3")
+    p.add_argument("--repeats", type=int, default=5)
+    p.add_argument("--collect-repeats", type=int, default=1)
+    a = p.parse_args(argv)
+    print(json.dumps(probe(a.data, a.robot, a.repeats, a.collect_repeats)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
