@@ -103,6 +103,7 @@ class Problem:
                 raise CalibrationError(f"term {t.name!r} uses a per-frame block: give it n_frames and rows_per_frame")
         self._groups = self._row_groups()
         self._cache: tuple | None = None
+        self._patterns: dict = {}
 
     # ------------------------------------------------------------ layout
     def _row_groups(self) -> list[list[Term]]:
@@ -203,8 +204,20 @@ class Problem:
             vals = np.concatenate([Bq, Ba], axis=2)[:, fr, fc]
             data.append(vals.ravel()), ri.append(rows.ravel()), ci.append(cols.ravel())
             row0 += n * per
-        J = csr_matrix((np.concatenate(data), (np.concatenate(ri), np.concatenate(ci))), shape=(row0, self.n_params))
-        return r, J
+        return r, self._csr(np.concatenate(data), ri, ci, row0, data_only)
+
+    def _csr(self, values: np.ndarray, ri: list, ci: list, n_rows: int, data_only: bool) -> csr_matrix:
+        """CSR from entries in assembly order; the sparsity pattern is fixed for a problem,
+        so its sort order and index arrays are computed once and reused."""
+        key = (data_only, n_rows, len(values))
+        if key not in self._patterns:
+            rows, cols = np.concatenate(ri), np.concatenate(ci)
+            order = np.lexsort((cols, rows))
+            indptr = np.zeros(n_rows + 1, dtype=np.int64)
+            np.add.at(indptr, rows + 1, 1)
+            self._patterns[key] = (order, cols[order], np.cumsum(indptr))
+        order, indices, indptr = self._patterns[key]
+        return csr_matrix((values[order], indices, indptr), shape=(n_rows, self.n_params))
 
     # ------------------------------------------------------------ solving
     def functions(self):
