@@ -42,13 +42,19 @@ def _git(*args: str) -> str | None:
     return out.stdout.strip() if out.returncode == 0 else None
 
 
+# What "the code" is: result files, reports and docs changing beside it do not make it dirty.
+CODE_PATHS = ("legcal_bench", "envs", "calibrators", "policies", "examples", "pyproject.toml")
+
+
 @lru_cache(maxsize=1)
 def code_version() -> dict[str, Any]:
-    """{"package", "commit" (None outside a git checkout), "dirty", "results_version"}."""
+    """{"package", "commit" (None outside a git checkout), "dirty" (uncommitted changes
+    to the code, CODE_PATHS), "results_version"}."""
     commit = _git("rev-parse", "HEAD")
     dirty = None
     if commit is not None:
-        status = _git("status", "--porcelain", "--untracked-files=no")
+        status = _git("status", "--porcelain", "--untracked-files=no", "--",
+                      *(f":(top){path}" for path in CODE_PATHS))
         dirty = bool(status) if status is not None else None
     return {"package": package_version(), "commit": commit, "dirty": dirty, "results_version": RESULTS_VERSION}
 
