@@ -35,6 +35,8 @@ TARGETS = {
                         lambda new, old: new <= 0.08 and old / new >= 2.0),
     "interfoot_end_to_end": ("inter-foot calibrate end to end (500 -> trim -> 450)", "<= 0.25 s",
                              lambda new, old: new <= 0.25),
+    "interfoot_solve_2point": ("inter-foot solve, forward-difference Jacobian", "–", None),
+    "interfoot_solve_alternating": ("inter-foot solve, the paper's alternation", "–", None),
     "yamane_solve_default": ("Yamane solve, 4 x 450 frames, default weights", "<= 0.25 s", lambda new, old: new <= 0.25),
     "yamane_solve_sensor": ("Yamane solve, 4 x 450 frames, sensor weights", "<= 0.25 s", lambda new, old: new <= 0.25),
     "collect_kinematic_frames_per_s": ("kinematic collection (frames/s)", ">= 5000", lambda new, old: new >= 5000),

@@ -25,6 +25,8 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 CALIBRATION_CASES = {
     "interfoot_solve": ("interfoot", dict(n_max=450, trim_fraction=0.0), "solve"),
     "interfoot_end_to_end": ("interfoot", {}, "total"),
+    "interfoot_solve_2point": ("interfoot", dict(n_max=450, trim_fraction=0.0, jacobian="2-point"), "solve"),
+    "interfoot_solve_alternating": ("interfoot", dict(n_max=450, trim_fraction=0.0, solver="alternating"), "solve"),
     "yamane_solve_default": ("yamane", dict(n_max=450), "solve"),
     "yamane_solve_sensor": ("yamane", dict(n_max=450, weights="sensor"), "solve"),
 }
