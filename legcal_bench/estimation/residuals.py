@@ -16,9 +16,9 @@ Jacobians. A right perturbation of the sole poses, T_BF(q + d) = T_BF Exp(J_F d)
 with J_F the sole's local frame Jacobian, perturbs C_k on the right by
 G_k d = [-Ad(C_k^-1) J_L | J_R] d, so with E_k = M^-1 C_k:
 
-  fixed mean (the paper's inner solve):  dr_k = Jr_inv(E_k) G_k d
+  fixed mean (the paper's inner solve):  dr_k = Jr_inv(r_k) G_k d,  r_k = Log(E_k)
   mean re-estimated (variable projection): M(dq) keeps sum_k r_k = 0, so
-      dr_k = A_k G_k d - B_k S^-1 sum_j A_j G_j d,   A = Jr_inv(E), B = Jl_inv(E), S = sum_j B_j
+      dr_k = A_k G_k d - B_k S^-1 sum_j A_j G_j d,   A = Jr_inv(r), B = Jl_inv(r), S = sum_j B_j
 """
 
 from __future__ import annotations
