@@ -15,7 +15,10 @@ well-posed, and its weight decides how the method ranks.
 Both terms (`legcal_bench.estimation.terms.SoleHeightTerm`, `ImuTiltTerm`) go into one
 `legcal_bench.estimation.problem.Problem` with a shared offsets block and a per-frame
 tilt block, so the Jacobian is block-sparse (2 unknowns per frame + 12 shared), handed
-to scipy's trust-region solver as a sparse matrix (LSMR inner solves); the information
+to scipy's trust-region solver as a sparse matrix (LSMR inner solves) with
+`solver="sparse"`; the default, `solver="projected"`, eliminates the per-frame tilts by
+variable projection (each frame's roll and pitch solved for the current offsets, then LM
+on the 12 offsets with the projected Jacobian), three times faster here. The information
 on the offsets has the per-frame tilts eliminated (Schur complement).
 
 Weights: `weights="default"` uses w_h = 1000 /m and w_imu = 1000 /rad (1 mm of height
@@ -42,13 +45,23 @@ from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
 
+# "projected": the per-frame roll and pitch eliminated by variable projection, LM on the 12
+# offsets (default); "sparse": all unknowns jointly, trust region with LSMR steps. Both
+# reach the same optimum (to ~1e-9 rad, the cost's flatness in its weak directions).
+SOLVERS = {"projected": "projected", "sparse": "trf"}
+
+
 class YamaneCalibrator(Calibrator):
     name = "yamane"
 
     def __init__(self, weights: str = "default", w_h: float | None = None, w_imu: float | None = None,
-                 n_max: int = paper.N_MAX_PER_STANCE, bound: float = paper.OFFSET_BOUND_RAD, tol: float = 1e-10):
+                 n_max: int = paper.N_MAX_PER_STANCE, bound: float = paper.OFFSET_BOUND_RAD, tol: float = 1e-10,
+                 solver: str = "projected"):
         if weights not in ("default", "sensor"):
             raise CalibrationError(f"weights {weights!r}: use default or sensor")
+        if solver not in SOLVERS:
+            raise CalibrationError(f"solver {solver!r}: use one of {', '.join(SOLVERS)}")
+        self.solver = solver
         self.weights, self.w_h_opt, self.w_imu_opt = weights, w_h, w_imu
         self.bound, self.tol = float(bound), float(tol)
         self.preprocess = PreprocessConfig(n_max=int(n_max))
@@ -59,7 +72,7 @@ class YamaneCalibrator(Calibrator):
 
     def settings(self) -> dict:
         return {"weights": self.weights, "w_h": self.w_h_opt, "w_imu": self.w_imu_opt, "bound": self.bound,
-                "n_max": self.preprocess.n_max}
+                "n_max": self.preprocess.n_max, "solver": self.solver}
 
     def _weights(self, recordings: list[Recording], kin: LegKinematics) -> tuple[float, float]:
         w_h, w_imu = 1000.0, 1000.0
@@ -97,7 +110,7 @@ class YamaneCalibrator(Calibrator):
                           [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(up, w_imu)])
         x0 = problem.pack({TILT: np.column_stack([roll0, pitch0])})
         t1 = time.perf_counter()
-        sol = problem.solve(x0, method="trf", tol=self.tol, max_nfev=100)
+        sol = problem.solve(x0, method=SOLVERS[self.solver], tol=self.tol, max_nfev=100)
         t_solve = time.perf_counter() - t1
         dq = problem.unpack(sol.x)[OFFSETS]
         w = np.linalg.eigvalsh(problem.information(sol.x)[0])

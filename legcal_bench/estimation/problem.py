@@ -238,7 +238,9 @@ class Problem:
         """scipy least squares from `x0`. `method="lm"` (MINPACK, unbounded) is re-run
         with the bounded trust-region method from its clipped answer if it leaves the
         bounds; `method="trf"` honours the bounds throughout (LSMR inner solves for
-        sparse problems). `on_jacobian(x)` is called at each Jacobian evaluation."""
+        sparse problems); `method="projected"` eliminates the per-frame blocks by variable
+        projection (`_solve_projected`). `on_jacobian(x)` is called at each Jacobian
+        evaluation."""
         self.reset_cache()
         fun, jac_fn = self.functions()
         lb, ub = self.bounds()
@@ -253,12 +255,78 @@ class Problem:
                 sol = least_squares(fun, np.clip(sol.x, lb, ub), jac=jac_arg, bounds=(lb, ub), method="trf",
                                     x_scale=1.0, ftol=tol, xtol=tol, gtol=tol, max_nfev=100, **kwargs)
             return sol
+        if method == "projected":
+            return self._solve_projected(x0, tol, max_nfev)
         # LSMR's default tolerances leave each trust-region step inexact, and trf then stops
         # ~1e-4 (relative) short of the optimum, at a point that moves with rounding; solved
         # to 1e-12 the answer is repeatable to ~1e-13 and comes in fewer evaluations.
         opts = dict(tr_solver="lsmr", tr_options={"atol": LSMR_TOL, "btol": LSMR_TOL}) if self.sparse else {}
         return least_squares(fun, x0, jac=jac_arg, bounds=(lb, ub), method="trf", x_scale=1.0, ftol=tol, xtol=tol,
                              gtol=tol, max_nfev=max_nfev, **{**opts, **kwargs})
+
+    def _frame_blocks(self, x: np.ndarray):
+        """Residual rows and Jacobian blocks at `x`, per frame where they have one:
+        (dense rows r_d (m,), J_d (m, n_shared); frame rows r_f (n, p), Bq (n, p, n_shared),
+        Ba (n, p, frame_width))."""
+        chunks = self._chunks(x, data_only=False)
+        dense = [c for c in chunks if c[0] == "dense"]
+        frames = [c for c in chunks if c[0] == "frames"]
+        n = self.n_frames
+        r_f = np.concatenate([c[1].reshape(n, -1) for c in frames], axis=1)
+        Bq = np.concatenate([c[2] for c in frames], axis=1)
+        Ba = np.concatenate([c[3] for c in frames], axis=1)
+        r_d = np.concatenate([c[1] for c in dense]) if dense else np.zeros(0)
+        J_d = np.vstack([c[2][:, :self.n_shared] for c in dense]) if dense else np.zeros((0, self.n_shared))
+        return r_d, J_d, r_f, Bq, Ba
+
+    def _solve_projected(self, x0: np.ndarray, tol: float, max_nfev: int, inner_tol: float = 1e-13,
+                         inner_max: int = 30):
+        """Variable projection: for shared values s each frame's block a_k solves its own
+        small least-squares problem (batched Gauss-Newton from the last solution); LM then
+        minimizes the reduced residual r(s, a*(s)) over s alone, with the reduced Jacobian
+        (I - B_k (B_k^T B_k)^-1 B_k^T) A_k per frame (Kaufman's). The optimum is the joint
+        problem's; the solve is dense and small (n_shared unknowns). Bounds on the shared
+        blocks are honoured by a bounded trust-region re-solve if LM leaves them."""
+        from scipy.optimize import OptimizeResult
+
+        if not self.per_frame:
+            raise CalibrationError("projected solve: the problem has no per-frame block to eliminate")
+        x = np.array(x0, dtype=float)
+        state = {"x": x, "nfev": 0, "cache": None}
+
+        def inner(s: np.ndarray):
+            if state["cache"] is not None and np.array_equal(state["cache"][0], s):
+                return state["cache"][1]
+            xk = state["x"].copy()
+            xk[:self.n_shared] = s
+            frames = xk[self.n_shared:].reshape(self.n_frames, self.frame_width)
+            for _ in range(inner_max):
+                r_d, J_d, r_f, Bq, Ba = self._frame_blocks(xk)
+                step = -np.linalg.solve(np.einsum("npi,npj->nij", Ba, Ba),
+                                        np.einsum("npi,np->ni", Ba, r_f)[..., None])[..., 0]
+                frames += step
+                if np.abs(step).max() < inner_tol:
+                    break
+            r_d, J_d, r_f, Bq, Ba = self._frame_blocks(xk)
+            G = np.linalg.solve(np.einsum("npi,npj->nij", Ba, Ba), np.einsum("npi,npj->nij", Ba, Bq))
+            J_f = Bq - Ba @ G  # (n, p, n_shared): the per-frame blocks projected out
+            r = np.concatenate([r_d, r_f.ravel()])
+            J = np.vstack([J_d, J_f.reshape(-1, self.n_shared)])
+            state["x"], state["nfev"] = xk, state["nfev"] + 1
+            state["cache"] = (s.copy(), (r, J))
+            return r, J
+
+        lb, ub = (b[:self.n_shared] for b in self.bounds())
+        fun, jac = (lambda s: inner(s)[0]), (lambda s: inner(s)[1])
+        s0 = x[:self.n_shared]
+        sol = least_squares(fun, s0, jac=jac, method="lm", x_scale=1.0, ftol=tol, xtol=tol, gtol=tol,
+                            max_nfev=max_nfev)
+        if np.any(sol.x < lb) or np.any(sol.x > ub):
+            sol = least_squares(fun, np.clip(sol.x, lb, ub), jac=jac, bounds=(lb, ub), method="trf", x_scale=1.0,
+                                ftol=tol, xtol=tol, gtol=tol, max_nfev=max_nfev)
+        r, _ = inner(sol.x)
+        return OptimizeResult(x=state["x"], cost=0.5 * float(r @ r), nfev=sol.nfev, status=sol.status,
+                              success=sol.success, message=sol.message)
 
     # ------------------------------------------------------------ information
     def information(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

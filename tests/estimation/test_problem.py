@@ -126,3 +126,4 @@ def test_bad_problem_layouts_are_refused(data):
     with pytest.raises(CalibrationError, match="per-frame block"):
         Problem([Block(OFFSETS, 12), Block(TILT, 2, per_frame=True)],
                 [ImuTiltTerm(up, 1.0), type("T", (TikhonovTerm,), {"blocks": (TILT,)})(np.ones(2))])
+
