@@ -98,6 +98,22 @@ def cmd_score(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_export(a: argparse.Namespace) -> int:
+    from legcal_bench.calibrators.base import CalibrationResult
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.export import fold_into_mjcf, write_offsets_yaml
+
+    result = CalibrationResult.load(a.result)
+    legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot), a.mjcf)
+    path = write_offsets_yaml(a.out, legmap, result.offsets_rad, source=str(Path(a.result).resolve()))
+    print(f"wrote {path}: {len(legmap.joint_names)} offsets of {legmap.name} in its joint names (q = q_enc + offset)")
+    if a.mjcf_out:
+        model = fold_into_mjcf(legmap, result.offsets_rad, a.mjcf_out)
+        print(f"wrote {model}: {legmap.mjcf.name} with each leg joint's ref lowered by its offset, so the model fed "
+              "raw encoder readings has the calibrated kinematics")
+    return 0
+
+
 def add_commands(sub) -> None:
     k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
     robot_args(k)
@@ -119,3 +135,12 @@ def add_commands(sub) -> None:
     sc.add_argument("--json", action="store_true")
     sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
     sc.set_defaults(func=cmd_score)
+
+    ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
+                                       "optionally a copy of its MJCF with the correction folded in")
+    ex.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out)")
+    ex.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
+    ex.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names")
+    ex.add_argument("--out", default="offsets.yaml", help="offsets YAML (default offsets.yaml)")
+    ex.add_argument("--mjcf-out", default=None, help="new folder for the corrected MJCF and its assets")
+    ex.set_defaults(func=cmd_export)
