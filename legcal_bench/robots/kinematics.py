@@ -127,9 +127,7 @@ class LegKinematics:
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.mjcf}")
             self.q_neutral[m.joints[m.getJointId(name)].idx_q] = angle
-        if not m.existFrame(legmap.pelvis):
-            raise LegMapError(f"{legmap.source}: pelvis body '{legmap.pelvis}' is not in {legmap.mjcf}")
-        self.pelvis_frame = m.getFrameId(legmap.pelvis)
+        self.pelvis_frame = self._frame_id(legmap.pelvis, "body", "pelvis")
         self.sole_frame = {s: self._add_frame(f"legcal_{s}_sole", legmap.legs[s].sole, f"legs.{s}.sole")
                            for s in SIDES}
         self.imu_frame = self._add_frame("legcal_imu", legmap.imu, "imu")
@@ -144,15 +142,30 @@ class LegKinematics:
         self.poe = self._extract_poe()
         self._prepare_batched()
 
+    # MJCF element kind -> Pinocchio frame type (its MJCF parser makes sites operational frames).
+    FRAME_TYPES = {"site": pin.FrameType.OP_FRAME, "body": pin.FrameType.BODY}
+
+    def _frame_id(self, name: str, kind: str, field: str) -> int:
+        """The Pinocchio frame of MJCF element `name` of `kind` (site or body), looked up by
+        type: a body, a joint and a site may share a name in an MJCF."""
+        m, ftype = self.model, self.FRAME_TYPES[kind]
+        matches = [i for i, f in enumerate(m.frames) if f.name == name and f.type == ftype]
+        if not matches:
+            others = sorted({str(f.type).split(".")[-1] for f in m.frames if f.name == name})
+            also = f" (only a frame of type {', '.join(others)} has that name)" if others else ""
+            raise LegMapError(f"{self.legmap.source}: {field} names {kind} '{name}', which is not a {kind} in "
+                              f"{self.legmap.mjcf}{also}; give the name of a {kind} (or write {field}: "
+                              f"{{{'body' if kind == 'site' else 'site'}: ...}})")
+        if len(matches) > 1:
+            raise LegMapError(f"{self.legmap.source}: {field} names {kind} '{name}', which matches {len(matches)} "
+                              f"{kind}s in {self.legmap.mjcf}; rename one of them in the MJCF")
+        return matches[0]
+
     def _add_frame(self, name: str, spec: FrameSpec, where: str) -> int:
         m = self.model
         if spec.site is not None:
-            if not m.existFrame(spec.site):
-                raise LegMapError(f"{self.legmap.source}: {where}.site '{spec.site}' is not a site in {self.legmap.mjcf}")
-            return m.getFrameId(spec.site)
-        if not m.existFrame(spec.body):
-            raise LegMapError(f"{self.legmap.source}: {where}.body '{spec.body}' is not a body in {self.legmap.mjcf}")
-        body = m.frames[m.getFrameId(spec.body)]
+            return self._frame_id(spec.site, "site", f"{where}.site")
+        body = m.frames[self._frame_id(spec.body, "body", f"{where}.body")]
         placement = body.placement * pose_xyz_rpy(spec.pos, spec.rpy)
         return m.addFrame(pin.Frame(name, body.parentJoint, placement, pin.FrameType.OP_FRAME))
 

@@ -1,6 +1,7 @@
 from dataclasses import fields
 from pathlib import Path
 
+import pinocchio as pin
 import pytest
 import yaml
 
@@ -96,3 +97,24 @@ def test_a_missing_mjcf_is_its_own_error_naming_the_path(tmp_path, a3_dict):
     with pytest.raises(MissingModelError, match=r"missing/robot\.xml, which does not exist"):
         load_legmap(path)
     assert "missing/robot.xml" in available(str(path)) and available("a3") is None
+
+
+def test_leg_map_frames_are_resolved_by_type(tmp_path, a3_dict):
+    """A site and a body may share a name in an MJCF: the leg map's field says which."""
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    xml = Path(a3_dict["mjcf"]).read_text()
+    # A site named like the pelvis body, inside it.
+    xml = xml.replace('<site name="imu"', '<site name="pelvis" pos="0 0 0"/>\n      <site name="imu"', 1)
+    assert xml.count('name="pelvis"') == 2
+    (tmp_path / "robot.xml").write_text(xml)
+    a3_dict["mjcf"] = str(tmp_path / "robot.xml")
+    kin = LegKinematics(load_legmap(_write(tmp_path, a3_dict)))
+    assert kin.model.frames[kin.pelvis_frame].type == pin.FrameType.BODY
+    a3_dict["imu"] = {"site": "pelvis"}
+    kin = LegKinematics(load_legmap(_write(tmp_path, a3_dict)))
+    assert kin.model.frames[kin.imu_frame].type == pin.FrameType.OP_FRAME
+    a3_dict["imu"] = {"site": "left_knee_joint"}  # a joint, not a site
+    with pytest.raises(LegMapError, match=r"imu.site names site 'left_knee_joint', which is not a site .*only a "
+                                          r"frame of type JOINT"):
+        LegKinematics(load_legmap(_write(tmp_path, a3_dict)))
