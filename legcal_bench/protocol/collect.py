@@ -17,7 +17,7 @@ import numpy as np
 from tqdm import tqdm
 
 from legcal_bench.data.recording import Recording, Truth, truth_path, write_manifest
-from legcal_bench.errors import ConfigError
+from legcal_bench.errors import ConfigError, IKError
 from legcal_bench.protocol.stances import ALL_STANCES, STANCES, feasible_trajectory, place, posture_bounds
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -79,8 +79,10 @@ def _segments(cfg: CollectConfig, rng: np.random.Generator):
         if s not in STANCES:
             raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}")
         yield f"stance_{s}", "stance", s, cfg.stance_s, cfg.jitter_m, cfg.jitter_rad
+    # Held-out sessions are drawn from the stances being recorded (a robot that cannot
+    # hold a lunge is not asked for one in its held-out sessions either).
     for i in range(cfg.heldout):
-        s = str(rng.choice(list(STANCES)))
+        s = str(rng.choice(list(cfg.stances)))
         yield f"heldout_{i + 1}", "heldout", s, cfg.heldout_s, cfg.heldout_jitter_m, cfg.heldout_jitter_rad
 
 
@@ -91,7 +93,12 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
     simulator (`DoubleSupportSim.run`)."""
     rng = np.random.default_rng(seed)  # the stream Gymnasium's reset(seed=seed) gives the env
     placement = place(ALL_STANCES[stance], sim.true_kin.dims, rng, jitter_m, jitter_rad)
-    sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
+    try:
+        sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
+    except IKError as e:
+        raise IKError(f"stance {stance} ({ALL_STANCES[stance].label}): its nominal posture is out of this robot's "
+                      f"reach ({e}); record the other stances (--stances), or widen the joint's range in the MJCF "
+                      "if the real robot allows it") from None
     sim.observe(rng)  # the reset observation (not logged; its noise draws keep the env's stream)
     n = int(round(duration * sim.rate_hz))
     low, high = posture_bounds(sim.nominal.dims)

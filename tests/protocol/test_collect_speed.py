@@ -231,3 +231,44 @@ def test_apply_servos_position_targets_and_motor_pd_law():
     q, qd = data.qpos[scene.qpos_adr], data.qvel[scene.dof_adr]
     expected = np.where(motors, (kp * (target - q) - kd * qd) / gear, target)
     np.testing.assert_array_equal(data.ctrl[scene.position_act], expected)
+
+
+def test_heldout_sessions_come_from_the_recorded_stances(tmp_path):
+    import json
+
+    from legcal_bench.protocol.collect import CollectConfig, collect
+
+    collect(CollectConfig(robot="a3", mode="kinematic", stances=("I", "IV"), heldout=6, stance_s=0.4,
+                          heldout_s=0.2, standing_s=0.0), tmp_path, progress=False)
+    from legcal_bench.data.recording import load_session
+
+    held = [r.stance for r in load_session(tmp_path) if r.kind == "heldout"]
+    assert len(held) == 6 and set(held) <= {"I", "IV"}
+    assert json.loads((tmp_path / "session.json").read_text())["config"]["stances"] == ["I", "IV"]
+
+
+def test_a_stance_out_of_reach_names_the_stance_and_the_fix(tmp_path):
+    from dataclasses import replace
+
+    import yaml
+
+    from legcal_bench.errors import IKError
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.robots import ASSETS
+
+    # A3-like with its ankle pitch limited to +-2 deg: no squat posture is reachable.
+    xml = (ASSETS / "a3.xml").read_text()
+    lm = yaml.safe_load((ASSETS / "a3.legmap.yaml").read_text())
+    for side in ("left", "right"):
+        name = f"{side}_ankle_pitch_joint"
+        i = xml.index(f'name="{name}"')
+        j = xml.index("range=", i)
+        k = xml.index('"', xml.index('"', j) + 1)
+        xml = xml[:j] + 'range="-0.035 0.035' + xml[k:]
+    (tmp_path / "a3.xml").write_text(xml)
+    lm["mjcf"] = "a3.xml"
+    (tmp_path / "narrow.legmap.yaml").write_text(yaml.safe_dump(lm))
+    with pytest.raises(IKError, match=r"stance I \(normal squat\): its nominal posture is out of this robot's reach .*"
+                                      r"ankle_pitch.*--stances"):
+        collect(CollectConfig(robot=str(tmp_path / "narrow.legmap.yaml"), mode="kinematic", stances=("I",),
+                              heldout=0, standing_s=0.0, stance_s=0.2), tmp_path / "out", progress=False)
