@@ -45,6 +45,3 @@ def get_suite(name: str) -> Suite:
         raise ConfigError(f"--suite {name!r}: use one of {list(SUITES)}")
     return SUITES[name]
 
-
-def suites_with_tag(tag: str) -> list[str]:
-    return [name for name, s in SUITES.items() if tag in s.tags]

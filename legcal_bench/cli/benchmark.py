@@ -69,7 +69,7 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import SUITES
 
-    suites = ", ".join(f"{n} ({s.description})" for n, s in SUITES.items())
+    suites = ", ".join(f"{n} ({s.description}; tags: {', '.join(s.tags)})" for n, s in SUITES.items())
     bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the leaderboard")
     bn.add_argument("--suite", default="smoke", help=f"one of: {suites}")
     bn.add_argument("--robots", nargs="+", default=None, help="override the suite's robots")

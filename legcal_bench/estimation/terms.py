@@ -40,9 +40,6 @@ class SegmentKinematics:
             self._dq = np.array(dq, copy=True)
         return self._fk
 
-    def __len__(self) -> int:
-        return len(self.q_enc)
-
 
 class InterFootTerm(Term):
     """Contact consistency of one segment: 6 rows per frame, (translation, rotation).

@@ -54,6 +54,17 @@ class Scene:
     motor_gear: np.ndarray
     servo_kp: np.ndarray
     servo_kd: np.ndarray
+    servo: tuple = ()  # (position ctrl index, target columns or None, motor PD arrays or None)
+
+    def __post_init__(self):
+        pa, ma = self.position_act >= 0, self.motor_act >= 0
+        act, cols = self.position_act[pa], np.flatnonzero(pa)
+        # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + 12] = target.
+        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + 12))
+        self.servo = (
+            slice(int(act[0]), int(act[0]) + 12) if contiguous else act, None if contiguous else cols,
+            (self.motor_act[ma], np.flatnonzero(ma), self.qpos_adr[ma], self.dof_adr[ma], self.servo_kp[ma],
+             self.servo_kd[ma], self.motor_gear[ma]) if ma.any() else None)
 
 
 def _find(model: mjcf.RootElement, kind: str, name: str, where: str):
@@ -195,19 +206,8 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
 def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
     """Drive the leg joints toward `target` (joint space): position actuators take the
     target as ctrl; torque motors get the leg map's PD law. It runs before every physics
-    step, so which joints have which actuator is worked out on the first call and kept
-    on the scene."""
-    servo = getattr(scene, "_servo_index", None)
-    if servo is None:
-        pa, ma = scene.position_act >= 0, scene.motor_act >= 0
-        act, cols = scene.position_act[pa], np.flatnonzero(pa)
-        # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + 12] = target.
-        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + 12))
-        servo = scene._servo_index = (
-            slice(int(act[0]), int(act[0]) + 12) if contiguous else act, None if contiguous else cols,
-            (scene.motor_act[ma], np.flatnonzero(ma), scene.qpos_adr[ma], scene.dof_adr[ma], scene.servo_kp[ma],
-             scene.servo_kd[ma], scene.motor_gear[ma]) if ma.any() else None)
-    pos_act, pos_cols, motors = servo
+    step, with the index layout worked out once (`Scene.servo`)."""
+    pos_act, pos_cols, motors = scene.servo
     if pos_cols is None:
         data.ctrl[pos_act] = target
     elif len(pos_cols):

@@ -35,6 +35,16 @@ def _yamane_problem(kin, q, up):
                    [SoleHeightTerm(kin, q, 1000.0), ImuTiltTerm(up, 500.0)])
 
 
+def test_compute_error_and_jacobian_are_the_two_halves_of_compute(data):
+    kin, q, up = data
+    term = FlatGroundTerm("flat", SegmentKinematics(kin, q), up, levelling_rotations(up), np.ones(5))
+    x = {OFFSETS: 0.01 * np.ones(12)}
+    r, J = term.compute(x)
+    np.testing.assert_array_equal(term.compute_error(x), r)
+    np.testing.assert_array_equal(term.compute_jacobian(x)[OFFSETS], J[OFFSETS])
+    assert r.shape == (5 * len(q),) and J[OFFSETS].shape == (5 * len(q), 12)
+
+
 def _central_differences(problem, x, h=1e-6):
     fd = np.empty((len(problem.evaluate(x)[0]), len(x)))
     for i in range(len(x)):

@@ -248,8 +248,6 @@ def test_heldout_sessions_come_from_the_recorded_stances(tmp_path):
 
 
 def test_a_stance_out_of_reach_names_the_stance_and_the_fix(tmp_path):
-    from dataclasses import replace
-
     import yaml
 
     from legcal_bench.errors import IKError
