@@ -44,3 +44,9 @@ class IKError(LegcalError):
 
 class CalibrationError(LegcalError):
     """The data cannot determine a calibration; the message says why and what to record."""
+
+
+class HoldError(LegcalError):
+    """The simulated robot did not hold a posture (it folded, tipped or slid): its
+    recording would not be static double-support data. The message names the stance,
+    what moved, the likely cause and the leg-map field that fixes it."""

@@ -213,6 +213,14 @@ def write_manifest(out_dir: str | Path, manifest: dict) -> Path:
     return atomic_write_json(Path(out_dir) / MANIFEST, {"format": FORMAT + "-session", "version": VERSION, **manifest})
 
 
+def is_session_dir(directory: str | Path) -> bool:
+    """True for a folder that holds only a session set (recordings, their ground truth,
+    a manifest): one that a new collection may replace."""
+    directory = Path(directory)
+    return directory.is_dir() and all(
+        p.is_file() and (p.name == MANIFEST or p.suffix == ".npz") for p in directory.iterdir())
+
+
 def list_segments(directory: str | Path) -> list[Path]:
     """Recording files in a directory (manifest order when there is one)."""
     directory = Path(directory)

@@ -57,3 +57,33 @@ def atomic_write_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return path
+
+
+def replace_dir(path: str | Path, write: Callable[[Path], None], keep_if: Callable[[Path], bool]) -> Path:
+    """`atomic_write_dir`, replacing an existing `path` if `keep_if(path)` says it may be
+    (e.g. it holds only an earlier result of the same kind); otherwise an existing,
+    non-empty `path` is refused with a ConfigError naming the fix. The old folder is
+    renamed aside, the new one renamed in, the old one removed: `path` is never a
+    mixture of the two."""
+    import shutil
+
+    from legcal_bench.errors import ConfigError
+
+    path = Path(path)
+    if path.exists() and not (path.is_dir() and (not any(path.iterdir()) or keep_if(path))):
+        raise ConfigError(f"--out {path} exists and holds other files; give a new folder (it is replaced only "
+                          "when it holds an earlier result of the same kind)")
+    if not path.exists():
+        return atomic_write_dir(path, write)
+    old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old"))
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    try:
+        write(tmp)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.rmtree(old, ignore_errors=True)
+        raise
+    os.replace(path, old / "previous")
+    os.replace(tmp, path)
+    shutil.rmtree(old, ignore_errors=True)
+    return path

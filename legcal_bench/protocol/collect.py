@@ -12,15 +12,19 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from tqdm import tqdm
 
-from legcal_bench.data.recording import Recording, Truth, truth_path, write_manifest
-from legcal_bench.errors import ConfigError, IKError
-from legcal_bench.protocol.stances import ALL_STANCES, STANCES, feasible_trajectory, place, posture_bounds
+from legcal_bench.data.recording import Recording, Truth, is_session_dir, truth_path, write_manifest
+from legcal_bench.errors import ConfigError, HoldError, IKError
+from legcal_bench.files.atomic import replace_dir
+from legcal_bench.protocol.servos import servo_gains
+from legcal_bench.protocol.stances import ALL_STANCES, STANCES, feasible_trajectory, fit_stance, place, posture_bounds
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
+from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
 from legcal_bench.sim.sensors import sensor_model
@@ -59,6 +63,9 @@ class SegmentSummary:
     max_sole_drift_mm: float
     max_sole_drift_deg: float
     unreachable: int
+    stance_scale: float = 1.0  # the stance's placement and depth, shrunk to fit the robot (1: as designed)
+    motion_scale: float = 1.0  # the posture motion's amplitude, shrunk to stay reachable and balanced
+    hold: dict = field(default_factory=dict)  # the hold check's measurements (`HoldReport.to_dict`)
 
 
 @dataclass
@@ -67,6 +74,7 @@ class CollectSummary:
     config: dict
     offsets_rad: list[float]
     joint_names: list[str]
+    servo_gains: dict = field(default_factory=dict)  # in use, with their source (weld and contact modes)
     segments: list[SegmentSummary] = field(default_factory=list)
     wall_s: float = 0.0
     sim_s: float = 0.0
@@ -86,79 +94,135 @@ def _segments(cfg: CollectConfig, rng: np.random.Generator):
         yield f"heldout_{i + 1}", "heldout", s, cfg.heldout_s, cfg.heldout_jitter_m, cfg.heldout_jitter_rad
 
 
+PLACEMENT_TRIES = 5
+
+
+class Segment(NamedTuple):
+    obs: dict  # stacked observations (what the robot logs)
+    truth: dict  # stacked ground truth
+    stance_scale: float  # the stance's placement and depth, shrunk to fit the robot (1: as designed)
+    motion_scale: float  # the posture motion's amplitude, shrunk to stay reachable and balanced
+
+
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,
-                   jitter_rad: float, progress=None) -> tuple[dict, dict]:
-    """Run one segment; returns stacked observations and ground truth. The posture
+                   jitter_rad: float, progress=None) -> Segment:
+    """Run one segment of `stance` (fitted to the robot, `fit_stance`). The posture
     motion's IK is solved once, in one batch (`feasible_trajectory`), and handed to the
     simulator (`DoubleSupportSim.run`)."""
     rng = np.random.default_rng(seed)  # the stream Gymnasium's reset(seed=seed) gives the env
-    placement = place(ALL_STANCES[stance], sim.true_kin.dims, rng, jitter_m, jitter_rad)
-    try:
-        sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
-    except IKError as e:
-        raise IKError(f"stance {stance} ({ALL_STANCES[stance].label}): its nominal posture is out of this robot's "
-                      f"reach ({e}); record the other stances (--stances), or widen the joint's range in the MJCF "
-                      "if the real robot allows it") from None
+    fitted = fit_stance(ALL_STANCES[stance], sim.nominal)
+    for attempt in range(PLACEMENT_TRIES):
+        # A jittered placement out of reach is drawn again (the built-ins never need to).
+        placement = place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad)
+        try:
+            sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
+            break
+        except IKError as e:
+            if attempt == PLACEMENT_TRIES - 1:
+                raise IKError(f"stance {stance} ({ALL_STANCES[stance].label}): its nominal posture is out of this "
+                              f"robot's reach ({e}); record the other stances (--stances), or widen the joint's "
+                              "range in the MJCF if the real robot allows it") from None
     sim.observe(rng)  # the reset observation (not logged; its noise draws keep the env's stream)
     n = int(round(duration * sim.rate_hz))
     low, high = posture_bounds(sim.nominal.dims)
     if stance == "standing":
-        return sim.run(np.clip(np.repeat(sim.posture[None], n, axis=0), low, high), rng, progress=progress)
-    traj, q_cmd = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz,
-                                      np.random.default_rng(seed + 7919), return_q=True)
-    clipped = np.clip(traj, low, high)
-    q_cmd[(clipped != traj).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
-    return sim.run(clipped, rng, q_cmd=q_cmd, progress=progress)
+        return Segment(*sim.run(np.clip(np.repeat(sim.posture[None], n, axis=0), low, high), rng,
+                                progress=progress), 1.0, 1.0)
+    motion = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz, np.random.default_rng(seed + 7919),
+                                 return_q=True)
+    clipped = np.clip(motion.postures, low, high)
+    q_cmd = motion.q.copy()
+    q_cmd[(clipped != motion.postures).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
+    return Segment(*sim.run(clipped, rng, q_cmd=q_cmd, progress=progress), fitted.scale, motion.scale)
+
+
+def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains_note: str = "") -> HoldReport:
+    """The hold check of one recorded segment; raises HoldError naming the stance, what
+    moved, the likely cause and the leg-map field that fixes it."""
+    report = HoldReport.from_truth(truth, sim.true_kin.dims.leg_length)
+    failures = report.failures()
+    if sim.mode == "kinematic" or not failures:
+        return report
+    sc = sim.scene
+    gains = ", ".join(f"{n} {kp:.0f}" for n, kp in zip(sim.sim_legmap.joint_names[:6], sc.servo_kp[:6]))
+    pelvis = report.pelvis_m > report.pelvis_limit_m
+    cause = ("the servos are too soft for the robot's weight (it sags or folds)" if pelvis else
+             "the posture tips the robot onto a sole edge, or a sole slips")
+    fix = ("give stiffer gains as servo_gains.<joint>: [kp, kd] in the leg map (the default is k_role * m g L, "
+           "see legcal_bench.protocol.servos)" if pelvis else
+           "check the sole frames and corners in the leg map (legs.<side>.sole, legs.<side>.corners), or record "
+           "fewer stances (--stances)")
+    raise HoldError(
+        f"segment {name}, stance {stance} ({ALL_STANCES[stance].label}, {sim.mode} mode): the robot did not hold "
+        f"the posture: {'; '.join(failures)}. Likely cause: {cause} (left-leg kp in use, N m/rad: {gains}; "
+        f"sources {sorted(set(sc.servo_source))}{'; ' + gains_note if gains_note else ''}). Fix: {fix}.")
 
 
 def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> CollectSummary:
+    """Record the session set into `out_dir`, whole or not at all: the recordings are
+    written to a temporary folder that replaces `out_dir` (a previous session set) only
+    once every segment has passed the hold check. Raises HoldError if the robot does not
+    hold a posture, IKError if a stance does not fit it."""
     out_dir = Path(out_dir)
     if cfg.mode not in MODES:
         raise ConfigError(f"mode {cfg.mode!r}: use one of {MODES}")
     legmap = load_robot(cfg.robot, cfg.mjcf)
+    sim_legmap = legmap if cfg.sim_robot is None else load_robot(cfg.sim_robot)
+    gains = servo_gains(sim_legmap) if cfg.mode != "kinematic" else None
     sim = DoubleSupportSim(
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
-        sensor_model(cfg.sensors), sim_legmap=None if cfg.sim_robot is None else load_robot(cfg.sim_robot),
-        rate_hz=cfg.rate_hz, knee_straight_error_rad=cfg.knee_straight_error_rad)
+        sensor_model(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
+        knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains)
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0])))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
     total = sum(int(round(duration * cfg.rate_hz)) for _, _, _, duration, _, _ in plan)
-    summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names)
+    summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names,
+                             servo_gains=gains.to_dict() if gains else {})
     session = f"{legmap.name}-{cfg.mode}-seed{cfg.seed}"
-    files = []
     t0 = time.perf_counter()
-    bar = tqdm(total=total, desc=f"collect {legmap.name} ({cfg.mode})", unit="frame", disable=not progress)
-    for (name, kind, stance, duration, jm, jr), seed in zip(plan, seeds):
-        bar.set_postfix_str(name)
-        obs, tr = record_segment(sim, stance, duration, seed, jm, jr, bar)
-        rec = Recording(
-            name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
-            time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],
-            sensor_model=sim.sensor, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session)
-        path = rec.save(out_dir / f"{name}.npz")
-        Truth(
-            q_true=tr["q_true"], offsets=sim.offsets, sole_poses_world=tr["sole_poses_world"],
-            pelvis_pose_world=tr["pelvis_pose_world"], posture=tr["posture"],
-            posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
-            imu_true_gyro=tr["imu_true_gyro"],
-            meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
-                  "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
-                  "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets)},
-        ).save(truth_path(path))
-        files.append(path.name)
-        summary.segments.append(SegmentSummary(
-            name=name, kind=kind, stance=stance, frames=rec.n_frames,
-            max_gyro=float(np.abs(rec.imu_gyro).max()),
-            joint_range_deg=np.rad2deg(np.ptp(tr["q_true"], axis=0)).round(2).tolist(),
-            max_sole_drift_mm=float(tr["sole_drift_m"].max() * 1e3),
-            max_sole_drift_deg=float(np.rad2deg(tr["sole_drift_rad"].max())),
-            unreachable=int((~tr["posture_reachable"]).sum())))
-    bar.close()
+
+    def write(folder: Path) -> None:
+        files = []
+        bar = tqdm(total=total, desc=f"collect {legmap.name} ({cfg.mode})", unit="frame", disable=not progress)
+        for (name, kind, stance, duration, jm, jr), seed in zip(plan, seeds):
+            bar.set_postfix_str(name)
+            obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar)
+            hold = check_hold(sim, name, stance, tr, gains.note if gains else "")
+            rec = Recording(
+                name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
+                time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],
+                sensor_model=sim.sensor, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session)
+            path = rec.save(folder / f"{name}.npz")
+            Truth(
+                q_true=tr["q_true"], offsets=sim.offsets, sole_poses_world=tr["sole_poses_world"],
+                pelvis_pose_world=tr["pelvis_pose_world"], posture=tr["posture"],
+                posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
+                imu_true_gyro=tr["imu_true_gyro"],
+                meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
+                      "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
+                      "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets)},
+            ).save(truth_path(path))
+            files.append(path.name)
+            summary.segments.append(SegmentSummary(
+                name=name, kind=kind, stance=stance, frames=rec.n_frames,
+                max_gyro=float(np.abs(rec.imu_gyro).max()),
+                joint_range_deg=np.rad2deg(np.ptp(tr["q_true"], axis=0)).round(2).tolist(),
+                max_sole_drift_mm=float(tr["sole_drift_m"].max() * 1e3),
+                max_sole_drift_deg=float(np.rad2deg(tr["sole_drift_rad"].max())),
+                unreachable=int((~tr["posture_reachable"]).sum()), stance_scale=stance_scale,
+                motion_scale=motion_scale, hold=hold.to_dict()))
+        bar.close()
+        write_manifest(folder, {"robot": legmap.name, "mode": cfg.mode, "seed": cfg.seed,
+                                "sensor_model": sim.sensor.to_dict(), "files": files, "config": asdict(cfg),
+                                "servo_gains": summary.servo_gains,
+                                "stances": {g.name: {"stance": g.stance, "stance_scale": g.stance_scale,
+                                                     "motion_scale": g.motion_scale, "hold": g.hold}
+                                            for g in summary.segments}})
+
+    replace_dir(out_dir, write, keep_if=is_session_dir)
     summary.wall_s = time.perf_counter() - t0
     summary.sim_s = total / cfg.rate_hz
-    write_manifest(out_dir, {"robot": legmap.name, "mode": cfg.mode, "seed": cfg.seed,
-                             "sensor_model": sim.sensor.to_dict(), "files": files, "config": asdict(cfg)})
     return summary
 
 
@@ -169,15 +233,25 @@ def format_summary(s: CollectSummary) -> str:
         f"{s.sim_s / max(s.wall_s, 1e-9):.1f}x real time)",
         "injected offsets (deg): " + ", ".join(
             f"{n.replace('_joint', '')} {np.rad2deg(v):+.3f}" for n, v in zip(s.joint_names, s.offsets_rad)),
-        f"{'segment':<12} {'kind':<9} {'stance':<9} {'frames':>6} {'max|gyro|':>10} {'sole drift':>18} "
-        f"{'joint range (deg, min..max over 12)':>36}",
     ]
+    if s.servo_gains:
+        g = s.servo_gains
+        lines.append("servo gains kp (N m/rad): " + ", ".join(
+            f"{n.replace('_joint', '')} {kp:.0f} ({src})" for n, kp, src in zip(s.joint_names[:6], g["kp"], g["source"]))
+            + f" (left leg; {g['note']})")
+    lines.append(f"{'segment':<12} {'kind':<9} {'stance':<9} {'frames':>6} {'max|gyro|':>10} {'sole drift':>18} "
+                 f"{'pelvis':>8} {'fit':>5} {'motion':>6} {'joint range (deg, min..max over 12)':>36}")
     for g in s.segments:
         lines.append(
             f"{g.name:<12} {g.kind:<9} {g.stance:<9} {g.frames:>6} {g.max_gyro:>8.3f}/s "
             f"{g.max_sole_drift_mm:>8.4f} mm {g.max_sole_drift_deg:>6.4f}° "
+            f"{g.hold.get('pelvis_mm', 0.0):>5.1f} mm {g.stance_scale:>5.2f} {g.motion_scale:>6.2f} "
             f"{min(g.joint_range_deg):>15.2f} .. {max(g.joint_range_deg):.2f}"
-            + (f"  ({g.unreachable} unreachable postures held)" if g.unreachable else "")
-            + ("  WARNING: a sole moved more than 5 mm (slip or fall): not static contact"
-               if g.max_sole_drift_mm > 5.0 else ""))
+            + (f"  ({g.unreachable} unreachable postures held)" if g.unreachable else ""))
+    shrunk = [g for g in s.segments if g.stance_scale < 1.0]
+    if shrunk:
+        lines.append("stances shrunk to fit this robot's joint limits (fit = placement and squat depth relative to "
+                     "the protocol's): " + ", ".join(sorted({f"{g.stance} x{g.stance_scale:g}" for g in shrunk})))
+    lines.append("pelvis: largest distance from the commanded pose; hold limits: pelvis 5 % of the leg length, "
+                 "soles 2 mm and 1 deg (every segment passed)")
     return "\n".join(lines)

@@ -12,7 +12,9 @@ pelvis pose in S as [x, y, z, roll, pitch, yaw] (m, rad; fixed-axis roll-pitch-y
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from typing import NamedTuple
 
 import numpy as np
 import pinocchio as pin
@@ -21,6 +23,7 @@ from scipy.spatial import ConvexHull
 from legcal_bench.errors import IKError
 from legcal_bench.geometry.poses import pose_xyz_rpy
 from legcal_bench.robots.kinematics import LegKinematics, RobotDims
+from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.sim.double_support import posture_ik
 
@@ -66,6 +69,52 @@ def posture_bounds(dims: RobotDims) -> tuple[np.ndarray, np.ndarray]:
     L = dims.leg_length
     return (np.array([-0.25 * L, -0.25 * L, 0.6 * L, -0.4, -0.4, -0.4]),
             np.array([0.25 * L, 0.25 * L, 1.0 * L, 0.4, 0.4, 0.4]))
+
+
+# A stance's nominal posture must keep every joint this far inside its limits, so the
+# placement jitter and the posture motion around it have room.
+FIT_MARGIN_RAD = 0.05
+FIT_SCALES = tuple(np.round(np.arange(1.0, 0.19, -0.05), 2))  # tried in turn, largest first
+MIN_DEPTH = 0.02  # leg lengths: a shallower squat puts the knees near their singularity
+
+
+class FittedStance(NamedTuple):
+    stance: Stance
+    scale: float  # 1: the protocol's stance; less: its placement and squat depth shrunk to fit
+
+
+def fit_stance(stance: Stance, kin: LegKinematics, margin_rad: float = FIT_MARGIN_RAD) -> FittedStance:
+    """`stance` shrunk until its nominal posture fits this robot: the lunge or widening
+    of the feet, the toe-out and the squat depth scaled together (by 1, 0.95, ..., 0.2)
+    until the nominal posture's IK keeps every joint `margin_rad` inside its limits.
+    Raises IKError naming the stance, the joints in the way and the fix."""
+    if stance.name == STANDING.name:
+        return FittedStance(stance, 1.0)
+    return _fit(stance, kin, float(margin_rad))
+
+
+@lru_cache(maxsize=256)
+def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
+    lower, upper = kin.q_lower + margin, kin.q_upper - margin
+    worst: list[str] = []
+    for s in FIT_SCALES:
+        fitted = stance if s == 1.0 else replace(
+            stance, left_x=stance.left_x * s, right_x=stance.right_x * s, extra_width=stance.extra_width * s,
+            toe_out=stance.toe_out * s, depth=max(stance.depth * s, min(MIN_DEPTH, stance.depth)))
+        pl = place(fitted, kin.dims)
+        T_BW = inverse(posture_poses(pl.nominal))
+        try:
+            q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
+        except IKError:
+            continue
+        outside = (q < lower) | (q > upper)
+        if not outside.any():
+            return FittedStance(fitted, float(s))
+        worst = [kin.legmap.joint_names[i] for i in np.flatnonzero(outside)]
+    raise IKError(f"stance {stance.name} ({stance.label}) does not fit this robot even shrunk to "
+                  f"{FIT_SCALES[-1]:g} of its size" + (f" (joints at their limits: {worst})" if worst else "")
+                  + "; record the other stances (--stances), or widen the joints' ranges in the MJCF if the real "
+                  "robot allows it")
 
 
 @dataclass(frozen=True)
@@ -120,14 +169,20 @@ def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray
     return float(margins[0]) if np.ndim(posture) == 1 else margins
 
 
+class Motion(NamedTuple):
+    postures: np.ndarray  # (N, 6)
+    q: np.ndarray  # (N, 12) their joint angles
+    scale: float  # the motion's amplitude relative to the stance's
+
+
 def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: float, rate_hz: float,
                         rng: np.random.Generator, shrink: float = 0.8, tries: int = 10, return_q: bool = False):
     """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
     is reachable within the joint limits of `kin` and statically balanced (the CoM at
     least a quarter sole width inside the support polygon, checked every fifth frame),
     so any robot gets a stance it can hold on a real floor. Returns the postures (N, 6),
-    with `return_q` also their joint angles (N, 12) on `kin` (the whole trajectory's IK
-    is solved in one batch, `posture_ik`)."""
+    with `return_q` a `Motion`: also their joint angles (N, 12) on `kin` (the whole
+    trajectory's IK is solved in one batch, `posture_ik`) and the amplitude scale used."""
     margin = 0.25 * kin.dims.sole_width
     base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng)
     for k in range(tries):
@@ -138,6 +193,6 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
             continue
         if (support_margin(kin, placement, traj[::5], q[::5]) < margin).any():
             continue
-        return (traj, q) if return_q else traj
+        return Motion(traj, q, shrink ** k) if return_q else traj
     raise IKError(f"stance {placement.stance.name}: no reachable, balanced posture motion for this robot "
                   f"(the nominal posture itself may be out of reach or off balance)")

@@ -39,7 +39,7 @@ from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
-from legcal_bench.sim.scene import Scene, apply_servos, build_scene
+from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SensorModel
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
@@ -66,7 +66,8 @@ class DoubleSupportSim:
 
     def __init__(self, legmap: LegMap, mode: str, offsets: np.ndarray, sensor: SensorModel,
                  sim_legmap: LegMap | None = None, rate_hz: float = 50.0, physics_dt: float = 0.001,
-                 knee_straight_error_rad: float = 0.005, settle_s: float = 3.0):
+                 knee_straight_error_rad: float = 0.005, settle_s: float = 3.0,
+                 servo_gains: ServoGains | None = None):
         self.legmap = legmap
         self.sim_legmap = legmap if sim_legmap is None else sim_legmap
         if self.sim_legmap.joint_names != legmap.joint_names:
@@ -84,6 +85,15 @@ class DoubleSupportSim:
         self.knee_straight_error_rad = float(knee_straight_error_rad)
         self.settle_s = float(settle_s)
         self.scene: Scene | None = build_scene(self.sim_legmap, mode, physics_dt) if mode != "kinematic" else None
+        if self.scene is not None:
+            if servo_gains is not None:
+                set_servo_gains(self.scene, np.array(servo_gains.kp), np.array(servo_gains.kd), servo_gains.source)
+            missing = [n for n, s in zip(self.sim_legmap.joint_names, self.scene.servo_source) if s == "none"]
+            if missing:
+                raise LegMapError(
+                    f"{self.sim_legmap.source or self.sim_legmap.name}: leg joints {missing} are torque motors with no "
+                    "servo gains: give servo_gains.<joint>: [kp, kd] in the leg map (or collect through "
+                    "legcal_bench.protocol, which uses the documented default)")
         self.data = mujoco.MjData(self.scene.model) if self.scene else None
         self.has_ft = bool(self.scene and self.scene.has_ft)
         if self.scene is not None:
@@ -313,7 +323,7 @@ class DoubleSupportSim:
                "imu_true_gyro": np.empty((n, 3))}
         if self.mode != "kinematic":
             buf.update(sole_pos=np.empty((n, 2, 3)), sole_rot=np.empty((n, 2, 9)),
-                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)))
+                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, 12)))
         return buf
 
     def _record(self, buf: dict[str, np.ndarray], i: int) -> None:
@@ -328,6 +338,7 @@ class DoubleSupportSim:
             buf["sole_rot"][i] = d.site_xmat[self._sole_sites]
             buf["pelvis_pos"][i] = d.xpos[b]
             buf["pelvis_rot"][i] = d.xmat[b]
+            buf["q_target"][i] = self._target
 
     def _snapshot(self, n: int) -> dict[str, np.ndarray]:
         buf = self._buffers(n)
@@ -362,4 +373,15 @@ class DoubleSupportSim:
             "sole_drift_rad": np.linalg.norm(Log(drift)[..., 3:], axis=-1),
             "imu_true_acc": buf["imu_true_acc"],
             "imu_true_gyro": buf["imu_true_gyro"],
+            "pelvis_hold_error_m": self._pelvis_hold_error(buf, soles, pelvis),
         }
+
+    def _pelvis_hold_error(self, buf, soles: np.ndarray, pelvis: np.ndarray) -> np.ndarray:
+        """(N,) distance (m) of the pelvis from its commanded pose: where the servo targets
+        put it on the simulated robot's kinematics, from each sole's actual pose (the
+        midpoint of the two legs' predictions). Zero in kinematic mode (exact postures)."""
+        if "q_target" not in buf:
+            return np.zeros(len(buf["time"]))
+        T_left, T_right = self.true_kin.sole_poses_batch(buf["q_target"])
+        predicted = ((soles[:, 0] @ inverse(T_left))[:, :3, 3] + (soles[:, 1] @ inverse(T_right))[:, :3, 3]) / 2
+        return np.linalg.norm(pelvis[:, :3, 3] - predicted, axis=-1)

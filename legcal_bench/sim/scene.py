@@ -33,6 +33,19 @@ WELD_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
 WELD_TORQUESCALE = 10.0
 
 
+@dataclass(frozen=True)
+class ServoGains:
+    """Servo gains for the 12 leg joints (leg-map order) and where each came from."""
+
+    kp: tuple[float, ...]  # N m/rad
+    kd: tuple[float, ...]  # N m s/rad
+    source: tuple[str, ...]  # "MJCF", "leg map", "default"
+    note: str = ""  # why these (e.g. why the default replaced the MJCF's gains)
+
+    def to_dict(self) -> dict:
+        return {"kp": list(self.kp), "kd": list(self.kd), "source": list(self.source), "note": self.note}
+
+
 @dataclass
 class Scene:
     model: mujoco.MjModel
@@ -54,9 +67,13 @@ class Scene:
     motor_gear: np.ndarray
     servo_kp: np.ndarray
     servo_kd: np.ndarray
+    servo_source: tuple[str, ...] = ()  # per leg joint: "MJCF", "leg map", "default" or "none"
     servo: tuple = ()  # (position ctrl index, target columns or None, motor PD arrays or None)
 
     def __post_init__(self):
+        self._layout()
+
+    def _layout(self) -> None:
         pa, ma = self.position_act >= 0, self.motor_act >= 0
         act, cols = self.position_act[pa], np.flatnonzero(pa)
         # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + 12] = target.
@@ -140,7 +157,9 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
                            site2=f"legcal_{side}_anchor_site", solref=list(WELD_SOLREF), solimp=list(WELD_SOLIMP))
 
     model = mujoco.MjModel.from_xml_string(m.to_xml_string(), m.get_assets())
-    return _index(model, legmap, mode, free.full_identifier, sole_site, corner_sites, imu_site, has_ft, where)
+    scene = _index(model, legmap, mode, free.full_identifier, sole_site, corner_sites, imu_site, has_ft, where)
+    set_servo_gains(scene, scene.servo_kp, scene.servo_kd, scene.servo_source)  # the leg map's gains into the model
+    return scene
 
 
 def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, has_ft, where) -> Scene:
@@ -174,17 +193,23 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
             position_act[k] = a
         elif is_motor:
             motor_act[k], gear[k] = a, float(model.actuator_gear[a, 0])
-    kp, kd = np.zeros(12), np.zeros(12)
+    # Servo gains per leg joint: the leg map's servo_gains override the MJCF's position
+    # actuators; a torque motor without leg-map gains has none yet (NaN, source "none":
+    # `legcal_bench.protocol.servos` gives it the default).
+    kp, kd = np.full(12, np.nan), np.full(12, np.nan)
+    source = []
     for k, name in enumerate(legmap.joint_names):
-        if position_act[k] >= 0:
-            continue
-        if name not in legmap.servo_gains:
-            raise LegMapError(
-                f"{where}: leg joint '{name}' has no position actuator in the MJCF; "
-                f"give its PD gains as servo_gains.{name}: [kp, kd] in the leg map")
-        if motor_act[k] < 0:
+        a = position_act[k]
+        if a < 0 and motor_act[k] < 0:
             raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF")
-        kp[k], kd[k] = legmap.servo_gains[name]
+        if name in legmap.servo_gains:
+            kp[k], kd[k] = legmap.servo_gains[name]
+            source.append("leg map")
+        elif a >= 0:
+            kp[k], kd[k] = model.actuator_gainprm[a, 0], -model.actuator_biasprm[a, 2]
+            source.append("MJCF")
+        else:
+            source.append("none")
     mocap = {}
     if mode == "weld":
         for side in SIDES:
@@ -200,7 +225,22 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         corner_sites={s: [sid(n) for n in names] for s, names in corner_sites.items()},
         imu_site=sid(imu_site), mocap=mocap, sensor_adr=sensor_adr, has_ft=has_ft,
         position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
+        servo_source=tuple(source),
     )
+
+
+def set_servo_gains(scene: Scene, kp: np.ndarray, kd: np.ndarray, source: tuple[str, ...]) -> None:
+    """Use gains `kp`, `kd` (12,) on the leg joints: written into the model's position
+    actuators (gain kp, bias -kp q - kd qdot), kept for the torque motors' PD law. Joints
+    with NaN gains keep none (a motor without gains cannot be driven: `apply_servos`
+    refuses it)."""
+    kp, kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
+    m = scene.model
+    for k, a in enumerate(scene.position_act):
+        if a >= 0 and np.isfinite(kp[k]):
+            m.actuator_gainprm[a, 0], m.actuator_biasprm[a, 1], m.actuator_biasprm[a, 2] = kp[k], -kp[k], -kd[k]
+    scene.servo_kp, scene.servo_kd, scene.servo_source = kp.copy(), kd.copy(), tuple(source)
+    scene._layout()
 
 
 def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
