@@ -30,8 +30,12 @@ objective a learned excitation policy maximizes. `information_reward=False` retu
 ## Starting state
 `reset(seed=..., options={"stance": "I", "jitter_m": 0.015, "jitter_rad": 0.05})`
 places the soles for the stance (I normal squat, II left lunge, III right lunge, IV
-wide squat, or `standing`), each jittered uniformly, puts the pelvis at the stance's
-nominal posture and lets the servos settle (`settle_s`, dynamic modes).
+wide squat, or `standing`; each shrunk to fit the robot's joint limits as the collector
+does, `legcal_bench.protocol.stances.fit_stance`), each jittered uniformly, puts the
+pelvis at the stance's nominal posture and lets the servos settle (`settle_s`, dynamic
+modes; servo gains as the collector chooses them, `legcal_bench.protocol.servos`).
+`info` carries the ground truth, including `pelvis_hold_error_m` and the soles' drift
+that the collector's hold check (`legcal_bench.sim.hold`) limits.
 
 ## Episode end
 Never terminates; registered ids truncate after 1000 steps.
@@ -58,7 +62,8 @@ from gymnasium import spaces
 from legcal_bench.envs.base import MujocoEnv
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.estimation.information import InformationGain
-from legcal_bench.protocol.stances import ALL_STANCES, Placement, place, posture_bounds
+from legcal_bench.protocol.servos import servo_gains
+from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, place, posture_bounds
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -98,10 +103,12 @@ class StaticDoubleSupportEnv(MujocoEnv):
         if mode not in MODES:
             raise ConfigError(f"mode {mode!r}: use one of {MODES}")
         legmap = _as_legmap(robot, mjcf)
+        sim_legmap = legmap if sim_robot is None else _as_legmap(sim_robot)
         self.sim = DoubleSupportSim(
             legmap, mode, resolve_offsets(offsets, legmap, np.random.default_rng(offset_seed)), sensor_model(sensors),
-            sim_legmap=None if sim_robot is None else _as_legmap(sim_robot), rate_hz=rate_hz, physics_dt=physics_dt,
-            knee_straight_error_rad=knee_straight_error_rad, settle_s=settle_s)
+            sim_legmap=sim_legmap, rate_hz=rate_hz, physics_dt=physics_dt,
+            knee_straight_error_rad=knee_straight_error_rad, settle_s=settle_s,
+            servo_gains=servo_gains(sim_legmap) if mode != "kinematic" else None)
         super().__init__(physics_dt, self.sim.n_substeps, render_mode)
         self.legmap, self.mode = legmap, mode
         low, high = posture_bounds(self.sim.nominal.dims)
@@ -127,7 +134,8 @@ class StaticDoubleSupportEnv(MujocoEnv):
         name = options.get("stance", "I")
         if name not in ALL_STANCES:
             raise ConfigError(f"reset option stance={name!r}: use one of {list(ALL_STANCES)}")
-        self.placement = place(ALL_STANCES[name], self.sim.true_kin.dims, self.np_random,
+        self.placement = place(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin.dims,
+                               self.np_random,
                                float(options.get("jitter_m", 0.015)), float(options.get("jitter_rad", 0.05)))
         self.sim.reset(self.placement.left, self.placement.right, self.placement.nominal, standing=name == "standing")
         obs = self.sim.observe(self.np_random)

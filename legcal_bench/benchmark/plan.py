@@ -49,11 +49,14 @@ class Dataset:
     @property
     def name(self) -> str:
         return (f"{robot_label(self.robot)}_{self.mode}_s{self.seed:02d}_x{self.scale:g}_{self.injection}"
-                + ("_" + "_".join(f"{k}{v:g}" for k, v in self.collect) if self.collect else ""))
+                + ("_" + "_".join(f"{k}{_short(v)}" for k, v in self.collect) if self.collect else ""))
+
+    def legmap(self):
+        return load_robot(self.robot, dict(self.collect).get("mjcf"))
 
     def offsets(self) -> np.ndarray:
         """The true offsets of this session set: native, plus scale x the paper's injection."""
-        legmap = load_robot(self.robot)
+        legmap = self.legmap()
         dq = resolve_offsets(f"random:{NATIVE_DEG}", legmap, np.random.default_rng(NATIVE_SEED_BASE + self.seed))
         if self.injection == "injected":
             dq = dq + self.scale * paper_injection(legmap)
@@ -62,6 +65,16 @@ class Dataset:
     def config(self) -> CollectConfig:
         return CollectConfig(robot=resolve_robot(self.robot), mode=self.mode, seed=self.seed,
                              offsets=tuple(float(v) for v in self.offsets()), **dict(self.collect))
+
+
+def _short(value) -> str:
+    """A collection override's value in a folder name: numbers as %g, stances joined by
+    "-", an MJCF by its file name without the suffix."""
+    if isinstance(value, (tuple, list)):
+        return "-".join(str(v) for v in value)
+    if isinstance(value, str):
+        return Path(value).stem
+    return f"{value:g}"
 
 
 @dataclass(frozen=True)
@@ -78,6 +91,9 @@ class Cell:
 
     def dataset(self, injection: str) -> Dataset:
         return Dataset(self.robot, self.mode, self.seed, self.scale, injection, self.collect)
+
+    def legmap(self):
+        return self.dataset("native").legmap()
 
     def path(self, results: Path) -> Path:
         scale = "" if self.scale == 1.0 else f"_x{self.scale:g}"
@@ -98,7 +114,10 @@ def _cell_key(cell: Cell) -> str:
 
 def _config_dict(ds: Dataset) -> dict:
     d = asdict(ds.config())
-    d["robot"] = robot_label(ds.robot)  # where the robot lives on this machine is not part of the data
+    # Where the robot and its model live on this machine is not part of the data.
+    d["robot"] = robot_label(ds.robot)
+    if d.get("mjcf"):
+        d["mjcf"] = Path(d["mjcf"]).name
     return d
 
 
@@ -127,7 +146,12 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
         s = Suite(suite, (), (), 1)  # an ad-hoc plan, e.g. a sweep
     else:
         s = get_suite(suite)  # raises: names the known suites
-    col = tuple(sorted({**s.collect, **(collect_overrides or {})}.items()))
+    overrides = {k: v for k, v in (collect_overrides or {}).items() if v is not None}
+    if overrides.get("mjcf") is not None:
+        overrides["mjcf"] = str(Path(overrides["mjcf"]).resolve())
+    if "stances" in overrides:
+        overrides["stances"] = tuple(overrides["stances"])
+    col = tuple(sorted({**s.collect, **overrides}.items()))
     variants = calibrator_variants(calibrators)
     cells = []
     for robot in robots or s.robots:

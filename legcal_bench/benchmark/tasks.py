@@ -4,6 +4,7 @@ workers run them alike; both are idempotent and write atomically."""
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import asdict
 from pathlib import Path
@@ -19,7 +20,6 @@ from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.protocol.collect import collect
 from legcal_bench.provenance import code_version
-from legcal_bench.robots import load_robot
 from legcal_bench.sim.offsets import paper_injection
 
 HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
@@ -34,12 +34,25 @@ def single_thread() -> None:
 
 
 def collect_dataset(ds: Dataset, data_dir: str) -> str:
-    """Collect one session set (kept if its manifest exists); returns its directory."""
+    """Collect one session set (kept if its manifest exists); returns its directory. A
+    set that cannot be collected (the robot does not hold a posture, a stance does not
+    fit) leaves `<name>.failed.json` with the reason instead, which the set's cells
+    record as their error; it is tried again on the next run."""
     single_thread()
     out = Path(data_dir) / ds.name
+    failed = failure_path(data_dir, ds)
     if not (out / MANIFEST).is_file():
-        collect(ds.config(), out, progress=False)
+        try:
+            collect(ds.config(), out, progress=False)
+        except LegcalError as e:
+            atomic_write_json(failed, {"dataset": ds.name, "error": f"{type(e).__name__}: {e}"})
+            return str(out)
+    failed.unlink(missing_ok=True)
     return str(out)
+
+
+def failure_path(data_dir: str | Path, ds: Dataset) -> Path:
+    return Path(data_dir) / f"{ds.name}.failed.json"
 
 
 def run_cell(cell: Cell, data_dir: str, results_dir: str, provenance: dict | None = None) -> dict:
@@ -47,14 +60,21 @@ def run_cell(cell: Cell, data_dir: str, results_dir: str, provenance: dict | Non
     resume key and the code version that made it: `provenance`, read by the runner when
     the run starts, else now)."""
     single_thread()
-    legmap = load_robot(cell.robot)
+    legmap = cell.legmap()
     out: dict = {"cell": asdict(cell), "robot": legmap.name, "joint_names": legmap.joint_names,
                  "key": cell.key(), "provenance": provenance or code_version()}
-    try:
-        _calibrate_and_score(cell, legmap, data_dir, out)
-    except LegcalError as e:
-        # A method that cannot calibrate this data is a result too, not a crash.
-        out["error"] = str(e)
+    # A session set that could not be collected, or a method that cannot calibrate the
+    # data, is a result too (a failed cell with its reason), not a crash.
+    failed = [failure_path(data_dir, cell.dataset(inj)) for inj in ("native", "injected")]
+    failed = [f"collecting {p.name[:-len('.failed.json')]}: {json.loads(p.read_text())['error']}"
+              for p in failed if p.is_file()]
+    if failed:
+        out["error"] = "; ".join(failed)
+    else:
+        try:
+            _calibrate_and_score(cell, legmap, data_dir, out)
+        except LegcalError as e:
+            out["error"] = str(e)
     atomic_write_json(cell.path(Path(results_dir)), out)
     return out
 

@@ -17,7 +17,8 @@ def cmd_bench(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark.suites import get_suite
 
     get_suite(a.suite)
-    cells = planning.plan(a.suite, robots=a.robots, modes=a.modes, seeds=a.seeds, calibrators=a.calibrators)
+    cells = planning.plan(a.suite, robots=a.robots, modes=a.modes, seeds=a.seeds, calibrators=a.calibrators,
+                          collect_overrides=_collect_overrides(a))
     out = Path(a.out)
     t0 = time.perf_counter()
     counts = run(cells, a.data, out / "results", workers=a.workers, scheduler=a.scheduler, progress=not a.quiet)
@@ -37,7 +38,8 @@ def cmd_sweep(a: argparse.Namespace) -> int:
 
     cells = planning.plan("sweep", robots=a.robots, modes=[a.mode], seeds=a.seeds, scales=a.scales,
                           calibrators=a.calibrators,
-                          collect_overrides=dict(stance_s=a.stance_seconds, heldout=a.heldout))
+                          collect_overrides=dict(stance_s=a.stance_seconds, heldout=a.heldout,
+                                                 **_collect_overrides(a)))
     out = Path(a.out)
     counts = run(cells, out / "data", out / "results", workers=a.workers, scheduler=a.scheduler,
                  progress=not a.quiet)
@@ -58,6 +60,34 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     return 0
 
 
+def _collect_overrides(a: argparse.Namespace) -> dict:
+    """The robot-fitting options bench and sweep share with collect."""
+    from legcal_bench.errors import ConfigError
+
+    if a.mjcf is not None and (a.robots is None or len(a.robots) != 1):
+        raise ConfigError("--mjcf replaces one robot's model: give exactly one robot with --robot")
+    out = {}
+    if a.mjcf is not None:
+        out["mjcf"] = a.mjcf
+    if a.stances is not None:
+        from legcal_bench.protocol.stances import STANCES
+
+        unknown = [s for s in a.stances if s not in STANCES]
+        if unknown:
+            raise ConfigError(f"--stances {unknown}: use stances from {list(STANCES)}")
+        out["stances"] = tuple(a.stances)
+    return out
+
+
+def _robot_options(p: argparse.ArgumentParser, default) -> None:
+    p.add_argument("--robots", "--robot", nargs="+", default=default,
+                   help="robots: built-in names or leg-map paths (default: "
+                        + (" ".join(default) if default else "the suite's") + ")")
+    p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names")
+    p.add_argument("--stances", nargs="+", default=None,
+                   help="stances to record, as in collect (default: I II III IV); held-out sessions follow them")
+
+
 def cmd_leaderboard(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark.leaderboard import generate
 
@@ -72,7 +102,7 @@ def add_commands(sub) -> None:
     suites = ", ".join(f"{n} ({s.description}; tags: {', '.join(s.tags)})" for n, s in SUITES.items())
     bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the leaderboard")
     bn.add_argument("--suite", default="smoke", help=f"one of: {suites}")
-    bn.add_argument("--robots", nargs="+", default=None, help="override the suite's robots")
+    _robot_options(bn, None)
     bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes")
     bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds")
     bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
@@ -84,7 +114,7 @@ def add_commands(sub) -> None:
     bn.set_defaults(func=cmd_bench)
 
     sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask")
-    sw.add_argument("--robots", nargs="+", default=["a2", "a3"])
+    _robot_options(sw, ["a2", "a3"])
     sw.add_argument("--calibrators", nargs="+", default=None)
     sw.add_argument("--mode", default="weld")
     sw.add_argument("--seeds", type=int, default=3)

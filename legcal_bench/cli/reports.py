@@ -31,6 +31,13 @@ def cmd_bench_env(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_robots_check(a: argparse.Namespace) -> int:
+    from legcal_bench.reports.robots_check import run_robots_check
+
+    print(run_robots_check(a.out, seeds=a.seeds, progress=not a.quiet, extra=a.extra))
+    return 0
+
+
 def cmd_regression(a: argparse.Namespace) -> int:
     import tempfile
 
@@ -80,6 +87,14 @@ def add_commands(sub) -> None:
     b.add_argument("--out", default="reports/bench_env", help="report directory (markdown + JSON)")
     b.add_argument("--quiet", action="store_true")
     b.set_defaults(func=cmd_bench_env)
+
+    rc = sub.add_parser("robots-check", help="servo gains, stance fit, hold check and recovery of the built-in and "
+                                             "generated test robots (every hip order, soft servos, narrow ankles)")
+    rc.add_argument("--seeds", type=int, default=2, help="seeds per robot and mode (default 2)")
+    rc.add_argument("--extra", nargs="+", default=[G1_EXAMPLE], help=f"more robots (default {G1_EXAMPLE})")
+    rc.add_argument("--out", default="reports/robots_check")
+    rc.add_argument("--quiet", action="store_true")
+    rc.set_defaults(func=cmd_robots_check)
 
     rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
     rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")

@@ -18,6 +18,7 @@ def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
 
 
 def cmd_info(a: argparse.Namespace) -> int:
+    from legcal_bench.protocol.servos import servo_gains
     from legcal_bench.robots import BUILTIN, load_robot
     from legcal_bench.robots.kinematics import LegKinematics
 
@@ -36,21 +37,27 @@ def cmd_info(a: argparse.Namespace) -> int:
         "joints": [],
     }
     axes = kin.joint_axes()
+    gains = servo_gains(legmap)
+    info["servo_gains_note"] = gains.note
     for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
         info["joints"].append({
             "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axes[i], 6).tolist(),
-            "limits_deg": np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist()})
+            "limits_deg": np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist(),
+            "servo": {"kp": gains.kp[i], "kd": gains.kd[i], "source": gains.source[i]}})
     if a.json:
         print(json.dumps(info, indent=2))
         return 0
     print(f"{info['name']}: {info['mjcf']}")
     print(f"  hip order {info['hip_order']}; leg length {kin.dims.leg_length:.3f} m, "
           f"feet at y = ±{kin.dims.foot_y:.3f} m; sole {kin.dims.sole_length:.3f} x {kin.dims.sole_width:.3f} m")
-    print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} limits (deg)")
+    print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} {'limits (deg)':<16} "
+          "servo kp, kd (source)")
     for j in info["joints"]:
         ax = " ".join(f"{v:+.3f}" for v in j["axis_in_pelvis_at_zero"])
+        sv = j["servo"]
         print(f"  {j['index']:>2} {j['name']:<28} {j['role']:<12} {ax:<26} "
-              f"{j['limits_deg'][0]:+.1f} .. {j['limits_deg'][1]:+.1f}")
+              f"{j['limits_deg'][0]:+6.1f} .. {j['limits_deg'][1]:+6.1f} {sv['kp']:7.0f}, {sv['kd']:5.1f} ({sv['source']})")
+    print(f"  servo gains for static collection: {gains.note}")
     if info["held_joints_deg"]:
         print("  held joints (deg): " + ", ".join(f"{k} {v:+.2f}" for k, v in info["held_joints_deg"].items()))
     return 0

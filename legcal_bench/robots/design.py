@@ -14,6 +14,7 @@ so a squat has hip pitch < 0, knee > 0, ankle pitch < 0.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from itertools import permutations
 
 HIP_ROLES = ("hip_pitch", "hip_roll", "hip_yaw")
 LEG_ROLES = HIP_ROLES + ("knee", "ankle_pitch", "ankle_roll")
@@ -144,3 +145,34 @@ PAIR_RYP = replace(BASE, name="pair_ryp", hip_order=R_Y_P)
 PAIR_PRY = replace(BASE, name="pair_pry", hip_order=P_R_Y)
 
 DESIGNS: dict[str, LegDesign] = {d.name: d for d in (A2, A3, PAIR_RYP, PAIR_PRY)}
+
+
+# Generated test robots: the A3-like body with any of the six proximal hip orders, soft
+# uniform servos (kp N m/rad, kd = 0.04 s kp) and a narrow symmetric ankle-pitch range:
+# the robots published models are, which the built-ins are not.
+HIP_ORDERS: tuple[tuple[str, str, str], ...] = tuple(permutations(HIP_ROLES))  # type: ignore[assignment]
+GENERATED_KP = (10.0, 30.0, 100.0)
+GENERATED_ANKLE_DEG = (25.0, 35.0)
+
+
+def generated_design(hip_order: tuple[str, str, str], kp: float, ankle_pitch_deg: float,
+                     base: LegDesign = A3) -> LegDesign:
+    """`base` with `hip_order`, every servo at `kp` (kd 0.04 s kp, torque limits kept) and
+    ankle pitch limited to +-`ankle_pitch_deg`, named e.g. gen_ryp_kp30_ankle25."""
+    import math
+
+    order = "".join(r[len("hip_")] for r in hip_order)
+    lim = math.radians(ankle_pitch_deg)
+    return replace(base, name=f"gen_{order}_kp{kp:g}_ankle{ankle_pitch_deg:g}", hip_order=tuple(hip_order),
+                   servos={r: Servo(kp, 0.04 * kp, s.torque_limit) for r, s in base.servos.items()},
+                   limits={**base.limits, "ankle_pitch": (-lim, lim)})
+
+
+def stiff_twin(design: LegDesign, base: LegDesign = A3) -> LegDesign:
+    """`design` with `base`'s stiff servos: the same robot, servos that hold."""
+    return replace(design, name=design.name + "_stiff", servos=dict(base.servos))
+
+
+# Six robots covering every hip order once and every (kp, ankle range) pair once.
+GENERATED: tuple[LegDesign, ...] = tuple(
+    generated_design(order, GENERATED_KP[i % 3], GENERATED_ANKLE_DEG[i % 2]) for i, order in enumerate(HIP_ORDERS))
