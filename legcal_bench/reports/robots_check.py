@@ -52,6 +52,7 @@ def _session(robot: str, mode: str, seed: int, folder: Path) -> tuple[dict, floa
 
 def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, extra: list[str] | None = None) -> str:
     rows, skipped = [], []
+    provenance = code_version()  # the code this run starts with
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         robots: list[tuple[str, str | None]] = [(r, None) for r in BUILTIN]
@@ -98,7 +99,7 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
             rows.append(row)
         bar.close()
     command = f"legcal-bench robots-check --seeds {seeds}" + (f" --extra {' '.join(extra)}" if extra else "")
-    meta = {"command": command, "provenance": code_version(), "skipped": skipped, "seeds": seeds,
+    meta = {"command": command, "provenance": provenance, "skipped": skipped, "seeds": seeds,
             "hold_limits": asdict(HOLD_LIMITS), "config": asdict(CollectConfig())}
     lines = [
         "# Robots as they come: servo gains, stance fit, hold check, recovery",
