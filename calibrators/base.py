@@ -13,6 +13,7 @@ with one class and one line in their pyproject:
 from __future__ import annotations
 
 import json
+import inspect
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
 from importlib.metadata import entry_points
@@ -53,21 +54,37 @@ class CalibrationResult:
         path = Path(path)
         try:
             d = json.loads(path.read_text())
-        except (OSError, json.JSONDecodeError) as e:
+        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
             raise CalibrationError(f"{path}: not a readable result JSON ({e})") from None
-        if d.get("format") != RESULT_FORMAT:
-            raise CalibrationError(f"{path}: field 'format' must be {RESULT_FORMAT!r}")
+        if not isinstance(d, dict) or d.get("format") != RESULT_FORMAT:
+            raise CalibrationError(f"{path}: field 'format' must be {RESULT_FORMAT!r} (a result written by "
+                                   "legcal-bench calibrate)")
         d.pop("format"), d.pop("version", None)
         missing = [k for k in ("calibrator", "robot", "offsets_rad") if k not in d]
         if missing:
             raise CalibrationError(f"{path}: missing fields {missing}")
+        known = set(cls.__dataclass_fields__)
+        unknown = sorted(set(d) - known)
+        if unknown:
+            raise CalibrationError(f"{path}: unknown fields {unknown}; a result has {sorted(known)}")
+        offsets = d["offsets_rad"]
+        if not isinstance(offsets, dict) or not offsets:
+            raise CalibrationError(f"{path}: field 'offsets_rad' must map joint names to offsets in radians")
+        for k, v in offsets.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+                raise CalibrationError(f"{path}: offsets_rad.{k} must be a finite number of radians, got {v!r}")
+        for k, want in (("pitch_sums_rad", dict), ("conditioning", dict), ("diagnostics", dict),
+                        ("timing_s", dict), ("settings", dict), ("warnings", list)):
+            if k in d and not isinstance(d[k], want):
+                raise CalibrationError(f"{path}: field '{k}' must be a JSON {'object' if want is dict else 'list'}")
         return cls(**d)
 
     def offsets_vector(self, joint_names: list[str]) -> np.ndarray:
         missing = [n for n in joint_names if n not in self.offsets_rad]
         if missing:
-            raise CalibrationError(f"result has no offsets for {missing}")
-        return np.array([self.offsets_rad[n] for n in joint_names])
+            raise CalibrationError(f"result has no offsets for {missing} (it was calibrated for another robot? "
+                                   f"its joints: {sorted(self.offsets_rad)[:4]}...)")
+        return np.array([self.offsets_rad[n] for n in joint_names], dtype=float)
 
 
 class Calibrator(ABC):
@@ -107,8 +124,41 @@ def available_calibrators() -> dict[str, type[Calibrator]]:
 
 
 def get_calibrator(name: str, **options: Any) -> Calibrator:
+    """The registered calibrator `name` with `options`; an option it does not take is a
+    CalibrationError listing the ones it does."""
     found = available_calibrators()
     if name not in found:
         raise CalibrationError(f"unknown calibrator {name!r}; registered: {sorted(found)} "
                                f"(add yours under the entry-point group '{ENTRY_POINT_GROUP}')")
-    return found[name](**options)
+    cls = found[name]
+    params = inspect.signature(cls.__init__).parameters
+    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
+        known = [k for k in params if k != "self"]
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            what = "--setting/--solver/--option" if set(unknown) & {"setting", "solver"} else "--option"
+            raise CalibrationError(f"calibrator {name!r} has no option {unknown} ({what}); its options: "
+                                   + (", ".join(known) if known else "none"))
+    return cls(**options)
+
+
+def number_option(name: str, value: Any, low: float | None = None, high: float | None = None, *,
+                  low_open: bool = False, high_open: bool = False, integer: bool = False) -> float | int:
+    """An option's value as a finite number within its range, or a CalibrationError
+    naming the option and the range (for calibrators checking their constructor's
+    arguments; the CLI passes `--option name=value`)."""
+    kind = "an integer" if integer else "a number"
+    rng = (("(" if low_open else "[") + ("-inf" if low is None else f"{low:g}") + ", "
+           + ("inf" if high is None else f"{high:g}") + (")" if high_open else "]"))
+    try:
+        if isinstance(value, bool) or (integer and isinstance(value, float) and not value.is_integer()):
+            raise ValueError
+        v = int(value) if integer else float(value)
+    except (TypeError, ValueError, OverflowError):
+        raise CalibrationError(f"option {name}={value!r}: expected {kind} in {rng}, e.g. --option {name}="
+                               f"{low if low is not None and not low_open else 1}") from None
+    bad = (not np.isfinite(v) or (low is not None and (v <= low if low_open else v < low))
+           or (high is not None and (v >= high if high_open else v > high)))
+    if bad:
+        raise CalibrationError(f"option {name}={value!r}: must be {kind} in {rng}")
+    return v

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from legcal_bench import paper
-from legcal_bench.calibrators.base import CalibrationResult, Calibrator
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
@@ -94,11 +94,14 @@ class InterFootCalibrator(Calibrator):
         if jacobian not in ("analytic", "2-point"):
             raise CalibrationError(f"jacobian {jacobian!r}: use analytic or 2-point (forward differences)")
         self.setting, self.solver, self.jacobian = setting, solver, jacobian
-        self.overrides = {k: float(v) for k, v in dict(lambda_f=lambda_f, lambda_g=lambda_g, lambda_q=lambda_q,
-                                                        lambda_knee=lambda_knee).items() if v is not None}
-        self.knee_prior_shift_rad = float(knee_prior_shift_rad)
-        self.trim_fraction, self.bound, self.max_outer, self.tol = float(trim_fraction), float(bound), int(max_outer), float(tol)
-        self.preprocess = PreprocessConfig(n_max=int(n_max))
+        self.overrides = {k: number_option(k, v, 0.0) for k, v in dict(
+            lambda_f=lambda_f, lambda_g=lambda_g, lambda_q=lambda_q, lambda_knee=lambda_knee).items() if v is not None}
+        self.knee_prior_shift_rad = number_option("knee_prior_shift_rad", knee_prior_shift_rad, -0.5, 0.5)
+        self.trim_fraction = number_option("trim_fraction", trim_fraction, 0.0, 0.5)
+        self.bound = number_option("bound", bound, 0.0, np.pi, low_open=True)
+        self.max_outer = number_option("max_outer", max_outer, 1, integer=True)
+        self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
+        self.preprocess = PreprocessConfig(n_max=number_option("n_max", n_max, 1, integer=True))
 
     @classmethod
     def benchmark_variants(cls) -> dict[str, dict]:

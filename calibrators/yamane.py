@@ -33,7 +33,7 @@ import time
 import numpy as np
 
 from legcal_bench import paper
-from legcal_bench.calibrators.base import CalibrationResult, Calibrator
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.levelling import up_in_base
@@ -62,9 +62,13 @@ class YamaneCalibrator(Calibrator):
         if solver not in SOLVERS:
             raise CalibrationError(f"solver {solver!r}: use one of {', '.join(SOLVERS)}")
         self.solver = solver
-        self.weights, self.w_h_opt, self.w_imu_opt = weights, w_h, w_imu
-        self.bound, self.tol = float(bound), float(tol)
-        self.preprocess = PreprocessConfig(n_max=int(n_max))
+        self.weights = weights
+        # An explicit weight (0 included) replaces the setting's.
+        self.w_h_opt = None if w_h is None else number_option("w_h", w_h, 0.0)
+        self.w_imu_opt = None if w_imu is None else number_option("w_imu", w_imu, 0.0)
+        self.bound = number_option("bound", bound, 0.0, np.pi, low_open=True)
+        self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
+        self.preprocess = PreprocessConfig(n_max=number_option("n_max", n_max, 1, integer=True))
 
     @classmethod
     def benchmark_variants(cls) -> dict[str, dict]:

@@ -27,6 +27,16 @@ def parse_options(pairs: list[str]) -> dict:
     return out
 
 
+def writable_parent(path: str, option: str) -> None:
+    """Create `path`'s folder now, so an unwritable output fails before the work."""
+    parent = Path(path).parent
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ConfigError(f"{option} {path}: cannot create its folder {parent} ({e.strerror}); give a path in a "
+                          "folder you can write") from None
+
+
 def cmd_calibrate(a: argparse.Namespace) -> int:
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.data.recording import load_session
@@ -38,8 +48,9 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     if a.solver is not None:
         options["solver"] = a.solver
     calibrator = get_calibrator(a.calibrator, **options)  # a bad name or option fails before any data is read
+    writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
-    recordings = load_session(a.bags, legmap.joint_names)
+    recordings = load_session(a.bags, legmap.joint_names, allow_partial=a.allow_partial)
     result = calibrator.calibrate(legmap, recordings)
     result.settings["robot_spec"] = resolve_robot(a.robot)
     result.save(a.out)
@@ -77,12 +88,14 @@ def cmd_score(a: argparse.Namespace) -> int:
 
     result = CalibrationResult.load(a.result)
     legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot))
-    s = score(a.bags, result, legmap)
+    s = score(a.bags, result, legmap, allow_partial=a.allow_partial)
     if not a.residuals:
         s.get("heldout", {}).pop("foot_height_residuals_mm", None)
     if a.json:
         print(json.dumps(s, indent=2))
         return 0
+    if "recovery_unavailable" in s:
+        print(f"recovery: not scored: {s['recovery_unavailable']}")
     if "recovery" in s:
         r = s["recovery"]
         print(f"recovery: RMS {r['rms_error_deg']:.4g} deg, max {r['max_error_deg']:.4g} deg; pitch-sum errors (deg) "
@@ -118,6 +131,9 @@ def add_commands(sub) -> None:
     k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
     robot_args(k)
     k.add_argument("--bags", required=True, help="directory of recordings (legcal-bench collect --out, or your own)")
+    k.add_argument("--allow-partial", action="store_true",
+                    help="read a folder without session.json (every *.npz in it), e.g. your own logs; "
+                         "otherwise refused, as a collection that may have stopped half-way")
     k.add_argument("--calibrator", default="interfoot", help="registered calibrator name (default interfoot)")
     k.add_argument("--setting", default=None, help="interfoot: operating (default), matched, sensor, a3_operating, "
                                                    "a2_operating")
@@ -130,6 +146,9 @@ def add_commands(sub) -> None:
 
     sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings")
     sc.add_argument("--bags", required=True)
+    sc.add_argument("--allow-partial", action="store_true",
+                    help="read a folder without session.json (every *.npz in it), e.g. your own logs; "
+                         "otherwise refused, as a collection that may have stopped half-way")
     sc.add_argument("--result", required=True)
     sc.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
     sc.add_argument("--json", action="store_true")

@@ -104,9 +104,20 @@ _META_KEYS = ("format", "version", "name", "kind", "stance", "robot", "joint_nam
 
 
 def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None = None) -> None:
+    if not isinstance(meta, dict):
+        raise RecordingError(f"{where}: field 'meta' must be a JSON object (see docs/recording-format.md)")
     for key in _META_KEYS:
         if key not in meta:
             raise RecordingError(f"{where}: missing metadata field '{key}' (see docs/recording-format.md)")
+    for key in ("name", "kind", "stance", "robot"):
+        if not isinstance(meta[key], str):
+            raise RecordingError(f"{where}: metadata field '{key}' must be a string, got {meta[key]!r}")
+    if not isinstance(meta["joint_names"], list) or not all(isinstance(n, str) for n in meta["joint_names"]):
+        raise RecordingError(f"{where}: field 'joint_names' must be a list of the 12 leg joint names (strings), "
+                             f"got {meta['joint_names']!r}")
+    if not isinstance(meta["sensor_model"], dict):
+        raise RecordingError(f"{where}: field 'sensor_model' must be a JSON object of sensor-model fields "
+                             f"(see docs/recording-format.md), got {meta['sensor_model']!r}")
     if meta["format"] != FORMAT:
         raise RecordingError(f"{where}: field 'format' is {meta['format']!r}, expected {FORMAT!r}")
     if meta["version"] != VERSION:
@@ -221,20 +232,38 @@ def is_session_dir(directory: str | Path) -> bool:
         p.is_file() and (p.name == MANIFEST or p.suffix == ".npz") for p in directory.iterdir())
 
 
-def list_segments(directory: str | Path) -> list[Path]:
-    """Recording files in a directory (manifest order when there is one)."""
+def list_segments(directory: str | Path, allow_partial: bool = False) -> list[Path]:
+    """Recording files of a session set, in its manifest's order. A folder without a
+    manifest may be a collection that stopped half-way: refused unless `allow_partial`
+    (then every *.npz recording in it, sorted)."""
     directory = Path(directory)
     if not directory.is_dir():
         raise RecordingError(f"{directory}: not a directory of recordings")
     man = directory / MANIFEST
     if man.is_file():
-        files = json.loads(man.read_text()).get("files", [])
+        try:
+            d = json.loads(man.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise RecordingError(f"{man}: not valid JSON ({e}); rewrite it or remove it and pass --allow-partial "
+                                 "to read every recording in the folder") from None
+        files = d.get("files") if isinstance(d, dict) else None
+        if not isinstance(files, list) or not files or not all(isinstance(f, str) for f in files):
+            raise RecordingError(f"{man}: field 'files' must list the session's recording files (a JSON object "
+                                 "with \"files\": [\"stance_I.npz\", ...]; see docs/recording-format.md)")
+        missing = [f for f in files if not (directory / f).is_file()]
+        if missing:
+            raise RecordingError(f"{man}: field 'files' names recordings that are not in the folder: {missing}")
         return [directory / f for f in files]
     paths = sorted(p for p in directory.glob("*.npz") if not p.name.endswith(".truth.npz"))
     if not paths:
         raise RecordingError(f"{directory}: no recordings (*.npz) found")
+    if not allow_partial:
+        raise RecordingError(f"{directory}: no {MANIFEST}: this may be a session set whose collection stopped "
+                             f"half-way; write a {MANIFEST} listing its files (docs/recording-format.md), or pass "
+                             "--allow-partial to use every recording in the folder")
     return paths
 
 
-def load_session(directory: str | Path, joint_names: list[str] | None = None) -> list[Recording]:
-    return [load_recording(p, joint_names) for p in list_segments(directory)]
+def load_session(directory: str | Path, joint_names: list[str] | None = None,
+                 allow_partial: bool = False) -> list[Recording]:
+    return [load_recording(p, joint_names) for p in list_segments(directory, allow_partial)]

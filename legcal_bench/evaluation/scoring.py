@@ -16,7 +16,9 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.calibrators.base import CalibrationResult
-from legcal_bench.data.recording import list_segments, load_recording, load_truth
+from pathlib import Path
+
+from legcal_bench.data.recording import list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import RecordingError
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.residuals import flat_ground_errors
@@ -31,18 +33,43 @@ def _errors_at(kin: LegKinematics, q: np.ndarray, up_B: np.ndarray) -> tuple[np.
     return flat_ground_errors(frame_kinematics(kin, q), up_B)
 
 
-def score(bags: str, result: CalibrationResult, legmap: LegMap) -> dict:
+NO_TRUTH = ("no ground truth (*.truth.npz) beside the recordings: recovery needs the simulator's truth (logs "
+            "from a real robot have none); the held-out scores use the recordings alone")
+
+
+def _truths(paths, names: list[str]) -> dict:
+    """The ground truth of each recording that has one, checked: every truth file must
+    load, match its recording's frames, and all must declare the same finite offsets."""
+    truths = {}
+    for p in paths:
+        if not truth_path(p).is_file():
+            continue
+        t = load_truth(p)
+        n = load_recording(p, names).n_frames
+        if np.shape(t.offsets) != (12,) or not np.isfinite(t.offsets).all():
+            raise RecordingError(f"{truth_path(p)}: field 'offsets' must be 12 finite numbers (radians)")
+        if np.shape(t.q_true) != (n, 12) or len(t.pelvis_pose_world) != n:
+            raise RecordingError(f"{truth_path(p)}: the ground truth has {len(t.q_true)} frames but its recording "
+                                 f"{n}: it belongs to another recording (truncated or foreign); re-collect the set")
+        truths[p] = t
+    if truths:
+        first = next(iter(truths.values())).offsets
+        bad = [str(truth_path(p).name) for p, t in truths.items() if not np.array_equal(t.offsets, first)]
+        if bad:
+            raise RecordingError(f"{Path(paths[0]).parent}: ground-truth files {bad} declare other offsets than "
+                                 "the rest: the folder mixes session sets; keep one set per folder")
+    return truths
+
+
+def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: bool = False) -> dict:
     kin = LegKinematics(legmap)
     names = legmap.joint_names
     dq = result.offsets_vector(names)
-    paths = list_segments(bags)
-    truths = {}
-    for p in paths:
-        try:
-            truths[p] = load_truth(p)
-        except RecordingError:
-            pass
+    paths = list_segments(bags, allow_partial)
+    truths = _truths(paths, names)
     out: dict = {"calibrator": result.calibrator, "robot": legmap.name, "settings": result.settings}
+    if not truths:
+        out["recovery_unavailable"] = NO_TRUTH
     if truths:
         injected = next(iter(truths.values())).offsets
         e = dq - injected

@@ -37,7 +37,23 @@ class SensorModel:
         unknown = set(d) - known
         if unknown:
             raise SensorModelError(f"sensor model: unknown fields {sorted(unknown)}; known: {sorted(known)}")
-        return cls(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+        out = {}
+        for k, v in d.items():
+            vector = isinstance(getattr(cls, k), tuple)
+            try:
+                if isinstance(v, (bool, str)) or (isinstance(v, (list, tuple)) and
+                                                  any(isinstance(x, (bool, str)) for x in v)):
+                    raise ValueError
+                a = np.asarray(v, dtype=float)
+            except (TypeError, ValueError):
+                a = None
+            if vector and (a is None or a.shape != (3,) or not np.isfinite(a).all()):
+                raise SensorModelError(f"sensor model: field '{k}' must be 3 finite numbers [x, y, z], got {v!r}")
+            if not vector and (a is None or a.shape != () or not np.isfinite(a) or a < 0):
+                raise SensorModelError(f"sensor model: field '{k}' must be one finite number >= 0 (a standard "
+                                       f"deviation or resolution in SI units), got {v!r}")
+            out[k] = tuple(float(x) for x in a) if vector else float(a)
+        return cls(**out)
 
     @cached_property
     def mount_rotation(self) -> np.ndarray:
