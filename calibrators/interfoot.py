@@ -34,6 +34,7 @@ from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
 from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, select_frames
 from legcal_bench.estimation.problem import Block, Problem
+from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
 from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
                                            TikhonovTerm)
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
@@ -113,6 +114,22 @@ class InterFootCalibrator(Calibrator):
                 "knee_prior_shift_rad": self.knee_prior_shift_rad, "trim_fraction": self.trim_fraction,
                 "bound": self.bound, "max_outer": self.max_outer, "preprocess": asdict(self.preprocess)}
 
+    @staticmethod
+    def _posterior(kin: LegKinematics, robot: LegMap, stances: list[Recording], problem, dq: np.ndarray,
+                   signs: np.ndarray) -> dict | None:
+        """Posterior standard deviations: the same frames' data rows, each divided by its
+        declared noise level, C*_s eliminated (the projected Jacobian) at the solution."""
+        sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
+        if sig is None:
+            return None
+        w = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
+            sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
+        whitened = _InterFootProblem(kin, problem.segments, w, None, [], problem.bound)
+        whitened.means_at(dq)
+        _, J = whitened.evaluate(dq, "projected")
+        J = J[:whitened.n_data_rows]
+        return posterior(J.T @ J, robot.joint_names, robot.joint_roles, signs)
+
     # ------------------------------------------------------------------ setup
     def weights_for(self, legmap: LegMap, recordings: list[Recording] | None = None) -> tuple[str, InterFootWeights]:
         if self.setting == "sensor":
@@ -190,9 +207,13 @@ class InterFootCalibrator(Calibrator):
             raise CalibrationError(
                 "the offsets are not determined by the data or any prior: " + "; ".join(obs["unobservable_reg"])
                 + ". Record several stances with varied postures (hip roll and yaw excitation).")
+        signs = kin.pitch_signs()
+        post = self._posterior(kin, robot, stances, problem, dq, signs)
+        if post is not None:
+            warnings += uncertainty_warnings(post)
+        warnings += bound_warnings(dq, self.bound, robot.joint_names)
         t_obs = time.perf_counter() - t2
         r_final, _ = problem.evaluate(dq, "projected")
-        signs = kin.pitch_signs()
         return CalibrationResult(
             calibrator=self.name, robot=robot.name,
             offsets_rad={n: float(v) for n, v in zip(robot.joint_names, dq)},
@@ -207,6 +228,7 @@ class InterFootCalibrator(Calibrator):
                 "cost": float(0.5 * r_final @ r_final),
                 "history_first_solve": hist1, "history_after_trim": hist2,
                 "pitch_signs": signs.tolist(),
+                "posterior": post if post is not None else {"note": NO_NOISE},
             },
             timing_s={"preprocess": t_pre, "solve": t_solve, "observability": t_obs,
                       "total": time.perf_counter() - t0},

@@ -41,6 +41,7 @@ from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.preprocess import PreprocessConfig, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
+from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
@@ -120,13 +121,26 @@ class YamaneCalibrator(Calibrator):
         w = np.linalg.eigvalsh(problem.information(sol.x)[0])
         conditioning = {"kappa_H_data": float(w[-1] / w[0]) if w[0] > 0 else float("inf"),
                         "eigenvalues_H_data": w.tolist()}
+        # Posterior: the same rows divided by their declared noise, per-frame tilts eliminated.
+        signs = kin.pitch_signs()
+        sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
+        warnings: list[str] = []
+        post = None
+        if sig is not None:
+            whitened = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
+                               [SoleHeightTerm(kin, Q, 1.0 / sig["height"]), ImuTiltTerm(up, 1.0 / sig["tilt"])])
+            post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
+            warnings += uncertainty_warnings(post)
+        warnings += bound_warnings(dq, self.bound, robot.joint_names)
         return CalibrationResult(
             calibrator=self.name, robot=robot.name,
             offsets_rad={nm: float(v) for nm, v in zip(robot.joint_names, dq)},
-            pitch_sums_rad=pitch_sums(dq, kin.pitch_signs()),
+            pitch_sums_rad=pitch_sums(dq, signs),
             conditioning=conditioning,
             diagnostics={"frames_used": int(n), "w_h": w_h, "w_imu": w_imu, "filter": reports,
-                         "cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status)},
+                         "cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status),
+                         "posterior": post if post is not None else {"note": NO_NOISE}},
             timing_s={"preprocess": t1 - t0, "solve": t_solve, "total": time.perf_counter() - t0},
             settings=self.settings(),
+            warnings=warnings,
         )

@@ -84,7 +84,7 @@ def _calibrate_and_score(cell: Cell, legmap, data_dir: str, out: dict) -> None:
     est = {}
     for inj in ("native", "injected"):
         bags = Path(data_dir) / cell.dataset(inj).name
-        recs = load_session(bags, names)
+        recs = load_session(bags, robot=legmap)
         res = get_calibrator(cell.calibrator, **dict(cell.options)).calibrate(legmap, recs)
         est[inj] = res.offsets_vector(names)
         s = score(str(bags), res, legmap)

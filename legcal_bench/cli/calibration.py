@@ -50,7 +50,7 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     calibrator = get_calibrator(a.calibrator, **options)  # a bad name or option fails before any data is read
     writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
-    recordings = load_session(a.bags, legmap.joint_names, allow_partial=a.allow_partial)
+    recordings = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
     result = calibrator.calibrate(legmap, recordings)
     result.settings["robot_spec"] = resolve_robot(a.robot)
     result.save(a.out)

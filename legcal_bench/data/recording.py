@@ -18,6 +18,8 @@ import numpy as np
 
 from legcal_bench.errors import LegcalError, RecordingError
 from legcal_bench.files.atomic import atomic_write, atomic_write_json
+from legcal_bench.robots.kinematics import joint_limits
+from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.sensors import SensorModel
 
 FORMAT = "legcal-recording"
@@ -99,6 +101,8 @@ def truth_path(path: str | Path) -> Path:
 
 
 # -------------------------------------------------------------------- validation
+# A logging rate outside this range means 'time' is not in seconds (ms or ns read as s).
+MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 5000.0
 _SHAPES = {"time": (None,), "q_enc": (None, 12), "imu_acc": (None, 3), "imu_gyro": (None, 3), "ft": (None, 2, 6)}
 _META_KEYS = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model")
 
@@ -143,6 +147,9 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         a = np.asarray(arrays[key])
         if a.dtype.kind not in "fi":
             raise RecordingError(f"{where}: field '{key}' must be numeric, got dtype {a.dtype}")
+        if a.dtype.kind == "i" and key in ("q_enc", "imu_acc", "imu_gyro", "time"):
+            raise RecordingError(f"{where}: field '{key}' is an integer array ({a.dtype}): raw counts or truncated "
+                                 "values? Save it as floats in SI units (radians, m/s^2, rad/s, seconds)")
         if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
             want = "(N, " + ", ".join(str(s) for s in shape[1:]) + ")" if len(shape) > 1 else "(N,)"
             raise RecordingError(f"{where}: field '{key}' has shape {a.shape}, expected {want}")
@@ -163,6 +170,13 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         k = int(np.flatnonzero(dt <= 0)[0])
         raise RecordingError(f"{where}: field 'time' is not strictly increasing (frame {k + 1}: {t[k + 1]} after "
                              f"{t[k]}); sort the frames by time and drop duplicates")
+    if n > 1:
+        rate = (n - 1) / (t[-1] - t[0])
+        if not MIN_RATE_HZ <= rate <= MAX_RATE_HZ:
+            unit = "milliseconds or nanoseconds" if rate < MIN_RATE_HZ else "minutes or hours"
+            raise RecordingError(
+                f"{where}: field 'time' gives a logging rate of {rate:.3g} Hz, outside {MIN_RATE_HZ:g}-{MAX_RATE_HZ:g} "
+                f"Hz: it looks like {unit}; 'time' must be in seconds (divide ms by 1e3, ns by 1e9)")
     q = np.asarray(arrays["q_enc"], dtype=float)
     if np.abs(q).max() > 2 * np.pi:
         raise RecordingError(f"{where}: field 'q_enc' has |angle| up to {np.abs(q).max():.1f}, which looks like "
@@ -265,5 +279,38 @@ def list_segments(directory: str | Path, allow_partial: bool = False) -> list[Pa
 
 
 def load_session(directory: str | Path, joint_names: list[str] | None = None,
-                 allow_partial: bool = False) -> list[Recording]:
-    return [load_recording(p, joint_names) for p in list_segments(directory, allow_partial)]
+                 allow_partial: bool = False, robot: LegMap | None = None) -> list[Recording]:
+    """The session set's recordings. With `robot` (the leg map they are calibrated
+    with), each must name that robot and keep its encoder angles within the robot's
+    joint limits (± `LIMIT_SLACK_RAD`, room for the offsets)."""
+    if robot is not None:
+        joint_names = robot.joint_names
+    recs = [load_recording(p, joint_names) for p in list_segments(directory, allow_partial)]
+    if robot is not None:
+        check_against_robot(recs, robot)
+    return recs
+
+
+# Encoder angles may pass a joint limit by an offset's size; beyond this they are not radians of that joint.
+LIMIT_SLACK_RAD = 0.15
+
+
+def check_against_robot(recordings: list[Recording], robot: LegMap) -> None:
+    """Refuse recordings of another robot, or angles no joint of this robot can reach."""
+    for r in recordings:
+        if r.robot != robot.name:
+            raise RecordingError(
+                f"{r.name}: field 'robot' is {r.robot!r} but the leg map is {robot.name!r}: recordings of one robot "
+                f"calibrated as another give wrong offsets; pass that robot's leg map (--robot), or fix the "
+                "recording's 'robot' field if it is the same robot")
+    lower, upper = joint_limits(robot)
+    for r in recordings:
+        out = (r.q_enc < lower - LIMIT_SLACK_RAD) | (r.q_enc > upper + LIMIT_SLACK_RAD)
+        if out.any():
+            j = int(np.flatnonzero(out.any(axis=0))[0])
+            frames = np.flatnonzero(out[:, j])
+            raise RecordingError(
+                f"{r.name}: field 'q_enc', joint {robot.joint_names[j]}: {frames.size} frame(s) (first {frames[0]}) "
+                f"at {r.q_enc[frames[0], j]:+.3f} rad, beyond its limits [{lower[j]:+.3f}, {upper[j]:+.3f}] rad by more "
+                f"than {LIMIT_SLACK_RAD} rad: degrees, a wrapped angle (±2π) or another joint's column? Encoder "
+                "angles must be radians, in the leg map's joint order")

@@ -139,6 +139,12 @@ class LegKinematics:
         finite = np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
         self.q_lower = np.where(finite, lower, -np.pi)
         self.q_upper = np.where(finite, upper, np.pi)
+        knees = [i for i, r in enumerate(legmap.joint_roles) if r == "knee"]
+        ks = legmap.knee_straight_rad
+        if not all(self.q_lower[i] - 0.1 <= ks <= self.q_upper[i] + 0.1 for i in knees):
+            raise LegMapError(f"{legmap.source or legmap.name}: knee_straight_rad {ks!r} is outside the knees' "
+                              f"range [{self.q_lower[knees[0]]:+.3f}, {self.q_upper[knees[0]]:+.3f}] rad: give the "
+                              "knee angle (radians) at which the leg is mechanically straight (often 0)")
         self.poe = self._extract_poe()
         self._prepare_batched()
 
@@ -525,6 +531,12 @@ class LegKinematics:
             sole_length=float(c[:, 0].max() - c[:, 0].min()),
             sole_width=float(c[:, 1].max() - c[:, 1].min()),
         )
+
+
+def joint_limits(legmap: LegMap) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of the 12 leg joints (rad), as `LegKinematics` reads them."""
+    kin = LegKinematics(legmap)
+    return kin.q_lower, kin.q_upper
 
 
 def _homogeneous(T) -> np.ndarray:
