@@ -13,7 +13,6 @@ pelvis pose in S as [x, y, z, roll, pitch, yaw] (m, rad; fixed-axis roll-pitch-y
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from functools import lru_cache
 from typing import NamedTuple
 
 import numpy as np
@@ -90,10 +89,14 @@ def fit_stance(stance: Stance, kin: LegKinematics, margin_rad: float = FIT_MARGI
     Raises IKError naming the stance, the joints in the way and the fix."""
     if stance.name == STANDING.name:
         return FittedStance(stance, 1.0)
-    return _fit(stance, kin, float(margin_rad))
+    # Kept with the robot's kinematics (one fit per stance and robot, freed with it).
+    cache = kin.__dict__.setdefault("_fitted_stances", {})
+    key = (stance, float(margin_rad))
+    if key not in cache:
+        cache[key] = _fit(stance, kin, float(margin_rad))
+    return cache[key]
 
 
-@lru_cache(maxsize=256)
 def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
     lower, upper = kin.q_lower + margin, kin.q_upper - margin
     worst: list[str] = []
