@@ -223,10 +223,13 @@ def test_posterior_names_what_a_short_single_stance_does_not_determine(tmp_path,
     assert max(u["std_rad"] for u in post["undetermined"]) > np.deg2rad(0.1)
 
 
-@pytest.mark.parametrize("robot", ["a3", "pair_pry"])
+G1_LEGMAP = str(Path(__file__).resolve().parents[2] / "examples" / "unitree_g1.legmap.yaml")
+
+
+@pytest.mark.parametrize("robot", ["a3", "pair_pry", G1_LEGMAP])
 def test_the_four_default_stances_leave_nothing_undetermined(tmp_path, robot):
     lm = load_robot(robot)
-    out = tmp_path / robot
+    out = tmp_path / lm.name
     collect(CollectConfig(robot=robot, mode="kinematic", heldout=0), out, progress=False)
     res = get_calibrator("interfoot").calibrate(lm, load_session(out, robot=lm))
     assert not [w for w in res.warnings if "not determined" in w or "at the bound" in w], res.warnings
