@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import tempfile
 from pathlib import Path
 from typing import Any, Callable
+
+from legcal_bench.errors import ConfigError
 
 
 def atomic_write(path: str | Path, write: Callable[[Any], None], mode: str = "w") -> Path:
@@ -45,8 +48,6 @@ def atomic_write_json(path: str | Path, obj: Any) -> Path:
 def atomic_write_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call `write(folder)` on a temporary folder beside `path`, then rename it to `path`
     (which must not exist): the folder appears whole or not at all."""
-    import shutil
-
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
@@ -65,10 +66,6 @@ def replace_dir(path: str | Path, write: Callable[[Path], None], keep_if: Callab
     non-empty `path` is refused with a ConfigError naming the fix. The old folder is
     renamed aside, the new one renamed in, the old one removed: `path` is never a
     mixture of the two."""
-    import shutil
-
-    from legcal_bench.errors import ConfigError
-
     path = Path(path)
     if path.exists() and not (path.is_dir() and (not any(path.iterdir()) or keep_if(path))):
         raise ConfigError(f"--out {path} exists and holds other files; give a new folder (it is replaced only "

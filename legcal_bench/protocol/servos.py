@@ -10,8 +10,8 @@ In order:
      kp = k_role * m * g * L, kd = 0.04 s * kp, with m the model's total mass, L its
      leg length and k_role (per m g L) = 6 hip pitch and roll, 3.2 hip yaw and ankle
      pitch, 8 knee, 2 ankle roll: twice the A3-like robot's own servos per m g L
-     (1500-2000 N m/rad on 54.5 kg, 0.935 m), which hold every stance within 1.6 % of
-     the leg length. The MJCF's torque limits stay as they are.
+     (1500-2000 N m/rad on 54.5 kg, 0.935 m), which hold every stance within about 2 %
+     of the leg length. The MJCF's torque limits stay as they are.
 The built-in robots hold with their MJCF gains and keep them.
 """
 
@@ -37,10 +37,12 @@ PROBE_SETTLE_S = 2.0
 PROBE_HOLD_S = 0.5
 
 
-def default_gains(legmap: LegMap, kin: LegKinematics | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The documented default (kp, kd) for this robot's 12 leg joints."""
+def default_gains(legmap: LegMap, kin: LegKinematics | None = None,
+                  mass: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The documented default (kp, kd) for this robot's 12 leg joints (`mass`: the
+    model's total mass if already known)."""
     kin = LegKinematics(legmap) if kin is None else kin
-    mgl = total_mass(legmap) * GRAVITY * kin.dims.leg_length
+    mgl = (total_mass(legmap) if mass is None else mass) * GRAVITY * kin.dims.leg_length
     kp = np.array([DEFAULT_KP_PER_MGL[r] * mgl for r in legmap.joint_roles])
     return kp, DEFAULT_KD_S * kp
 
@@ -67,7 +69,7 @@ def _choose(legmap: LegMap) -> ServoGains:
     sc = build_scene(legmap, "weld")
     kp, kd, source = np.array(sc.servo_kp), np.array(sc.servo_kd), list(sc.servo_source)
     kin = LegKinematics(legmap)
-    dkp, dkd = default_gains(legmap, kin)
+    dkp, dkd = default_gains(legmap, kin, mass=float(sc.model.body_mass.sum()))  # the scene adds no mass
     notes = []
     if "none" in source:
         notes.append("torque motors without servo_gains in the leg map use the default k_role * m g L")

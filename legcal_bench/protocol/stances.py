@@ -20,10 +20,9 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull
 
 from legcal_bench.errors import IKError
-from legcal_bench.geometry.poses import pose_xyz_rpy
-from legcal_bench.robots.kinematics import LegKinematics, RobotDims
 from legcal_bench.geometry.lie import inverse
-from legcal_bench.geometry.poses import posture_poses
+from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
+from legcal_bench.robots.kinematics import LegKinematics, RobotDims
 from legcal_bench.sim.double_support import posture_ik
 
 
