@@ -29,10 +29,11 @@ from legcal_bench import paper
 from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.datacheck import data_warnings
 from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
-from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, select_frames
+from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
 from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
@@ -163,14 +164,10 @@ class InterFootCalibrator(Calibrator):
             for s in segs:
                 up = up_in_base(s.imu_acc, R_BI)
                 segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames))
-        for rep in reports:
-            if rep.kept == 0:
-                warnings.append(f"{rep.name}: no usable frames left ({_report_text(rep)}); segment skipped")
-            elif rep.rotation + rep.translation + rep.slip_splits + rep.short_pieces:
-                warnings.append(f"{rep.name}: contact filter removed frames ({_report_text(rep)})")
+        warnings += filter_warnings(reports)
         if not segments:
             raise CalibrationError("no usable frames in any stance after filtering: "
-                                   + "; ".join(f"{r.name}: {_report_text(r)}" for r in reports))
+                                   + "; ".join(f"{r.name}: {r.text()}" for r in reports))
         # Knee prior from the straight-leg standing phase.
         knees = [i for i, role in enumerate(robot.joint_roles) if role == "knee"]
         prior = None
@@ -212,6 +209,7 @@ class InterFootCalibrator(Calibrator):
         if post is not None:
             warnings += uncertainty_warnings(post)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
+        warnings += data_warnings(kin, recordings, dq)
         t_obs = time.perf_counter() - t2
         r_final, _ = problem.evaluate(dq, "projected")
         return CalibrationResult(
@@ -235,12 +233,6 @@ class InterFootCalibrator(Calibrator):
             settings=self.settings(),
             warnings=warnings,
         )
-
-
-def _report_text(r: FilterReport) -> str:
-    return (f"{r.raw} raw, {r.non_finite} non-finite, {r.gyro} gyro > guard, {r.rotation} rotation residual, "
-            f"{r.translation} translation residual, {r.slip_splits} slip split(s), {r.short_pieces} in short "
-            f"pieces, {r.clustered_out} clustered out, {r.kept} kept")
 
 
 class _InterFootProblem:

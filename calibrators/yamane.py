@@ -29,6 +29,7 @@ from the recordings' declared sensor model (1/sigma of each residual).
 from __future__ import annotations
 
 import time
+from dataclasses import asdict
 
 import numpy as np
 
@@ -36,9 +37,10 @@ from legcal_bench import paper
 from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.datacheck import data_warnings
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
-from legcal_bench.estimation.preprocess import PreprocessConfig, select_frames
+from legcal_bench.estimation.preprocess import PreprocessConfig, filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
 from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
@@ -98,12 +100,13 @@ class YamaneCalibrator(Calibrator):
         Q, acc, reports = [], [], []
         for r in stances:
             segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess)
-            reports.append(rep.__dict__)
+            reports.append(rep)
             for s in segs:
                 Q.append(s.q_enc)
                 acc.append(s.imu_acc)
         if not Q:
-            raise CalibrationError("no usable frames in any stance after filtering")
+            raise CalibrationError("no usable frames in any stance after filtering: "
+                                   + "; ".join(f"{r.name}: {r.text()}" for r in reports))
         Q, acc = np.vstack(Q), np.vstack(acc)
         up = up_in_base(acc, kin.R_BI)
         w_h, w_imu = self._weights(stances, kin)
@@ -124,7 +127,7 @@ class YamaneCalibrator(Calibrator):
         # Posterior: the same rows divided by their declared noise, per-frame tilts eliminated.
         signs = kin.pitch_signs()
         sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
-        warnings: list[str] = []
+        warnings: list[str] = filter_warnings(reports)
         post = None
         if sig is not None:
             whitened = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
@@ -132,12 +135,13 @@ class YamaneCalibrator(Calibrator):
             post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
             warnings += uncertainty_warnings(post)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
+        warnings += data_warnings(kin, recordings, dq)
         return CalibrationResult(
             calibrator=self.name, robot=robot.name,
             offsets_rad={nm: float(v) for nm, v in zip(robot.joint_names, dq)},
             pitch_sums_rad=pitch_sums(dq, signs),
             conditioning=conditioning,
-            diagnostics={"frames_used": int(n), "w_h": w_h, "w_imu": w_imu, "filter": reports,
+            diagnostics={"frames_used": int(n), "w_h": w_h, "w_imu": w_imu, "filter": [asdict(r) for r in reports],
                          "cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status),
                          "posterior": post if post is not None else {"note": NO_NOISE}},
             timing_s={"preprocess": t1 - t0, "solve": t_solve, "total": time.perf_counter() - t0},

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import json
 import os
+import threading
+import time
 from concurrent.futures import Executor, ProcessPoolExecutor, as_completed
 from multiprocessing import get_context
 from pathlib import Path
@@ -34,7 +36,20 @@ def make_executor(scheduler: str | None, workers: int) -> tuple[Executor, object
     # each (faster here, and the same arithmetic, hence the same numbers, on every run).
     for k in THREAD_VARIABLES:
         os.environ.setdefault(k, "1")
-    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")), None
+    return ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"), initializer=watch_parent,
+                               initargs=(os.getpid(),)), None
+
+
+def watch_parent(parent_pid: int, period_s: float = 0.5) -> None:
+    """Worker initializer: a daemon thread that ends this worker once its parent is
+    gone (a killed `bench` would otherwise leave its workers waiting forever)."""
+    def watch():
+        while True:
+            if os.getppid() != parent_pid:
+                os._exit(1)
+            time.sleep(period_s)
+
+    threading.Thread(target=watch, name="legcal-watch-parent", daemon=True).start()
 
 
 def is_done(cell: Cell, results_dir: Path) -> bool:

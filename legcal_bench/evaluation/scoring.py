@@ -13,13 +13,13 @@ heldout: on the held-out recordings, before (dq = 0) and after (dq_hat) correcti
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from legcal_bench.calibrators.base import CalibrationResult
-from pathlib import Path
-
-from legcal_bench.data.recording import list_segments, load_recording, load_truth, truth_path
-from legcal_bench.errors import RecordingError
+from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
+from legcal_bench.errors import CalibrationError, RecordingError
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.residuals import flat_ground_errors
 from legcal_bench.evaluation.metrics import rms
@@ -65,7 +65,11 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
     kin = LegKinematics(legmap)
     names = legmap.joint_names
     dq = result.offsets_vector(names)
+    if result.robot != legmap.name:
+        raise CalibrationError(f"the result was calibrated for robot {result.robot!r} but the leg map is "
+                               f"{legmap.name!r}: score it with the leg map it was calibrated with (--robot)")
     paths = list_segments(bags, allow_partial)
+    check_against_robot([load_recording(p, names) for p in paths], legmap)
     truths = _truths(paths, names)
     out: dict = {"calibrator": result.calibrator, "robot": legmap.name, "settings": result.settings}
     if not truths:

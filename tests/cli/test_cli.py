@@ -113,3 +113,24 @@ def test_only_legcal_errors_exit_2_an_internal_error_keeps_its_traceback(monkeyp
     monkeypatch.setattr(robots_cli, "cmd_info", bad_input)
     assert main(["info"]) == 2
     assert capsys.readouterr().err.strip() == "legcal-bench info: error: --thing: use one of a, b"
+
+
+def test_calibrate_with_yamane_then_score(tmp_path, capsys):
+    """The Yamane calibrator through the CLI: its result prints, saves, reloads and
+    scores (it once crashed in the result formatter after writing its JSON)."""
+    bags = tmp_path / "bags"
+    assert main(["collect", "--robot", "a3", "--mode", "kinematic", "--sensors", "zero", "--out", str(bags),
+                 "--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "1",
+                 "--quiet"]) == 0
+    capsys.readouterr()
+    out = tmp_path / "yamane.json"
+    assert main(["calibrate", "--robot", "a3", "--bags", str(bags), "--calibrator", "yamane",
+                 "--option", "tol=1e-12", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "kappa(H_data)" in printed and f"wrote {out}" in printed
+    result = json.loads(out.read_text())
+    assert result["calibrator"] == "yamane" and result["settings"]["weights"] == "default"
+    assert main(["score", "--bags", str(bags), "--result", str(out), "--json"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    assert s["recovery"]["rms_error_deg"] < 1e-6
+    assert s["heldout"]["foot_height_rms_mm"]["after"] < 1e-4 < s["heldout"]["foot_height_rms_mm"]["before"]

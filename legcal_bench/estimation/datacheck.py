@@ -1,0 +1,385 @@
+"""Warnings derived from the data: what the recordings say about themselves.
+
+The calibrators run these checks on their recordings after the fit and add the
+findings to their result's warnings. Each check judges a stance on the raw encoders and
+corrected by the calibrator's estimate and keeps the better fit: a real defect shows in
+both, while offsets show only raw and an estimate spoiled by bad data only corrected. They are never
+refusals (a deliberate effect stays possible); each names the stance, the channel, the
+size and the likely cause:
+
+  frozen channel   an encoder or IMU channel reads bit-identical values for at least 10
+                   frames and 0.2 s while other channels move;
+  swapped columns  with the feet fixed the inter-foot transform is constant: if it varies
+                   by more than 5 mm (median distance from its median) within a stance,
+                   every exchange of two columns, of the legs, and every reversed joint is
+                   tried, and one that makes it 5x steadier is named;
+  IMU axes         the IMU's vertical disagrees with the soles' normals (the posture's up
+                   with flat feet on a level floor) by more than 3 deg, or moves against
+                   them by more than 1.5 deg RMS; a signed permutation of the
+                   accelerometer's axes that fits is named;
+  soles apart     in double support (stances and the straight-leg phase) the right sole
+                   sits more than 20 mm above or below the left, or tilts more than 10 deg
+                   against it;
+  bent knees       the straight-leg phase reads a knee more than 5 deg from straight;
+  slide, yaw creep, lifted heel   per stance, the change between its first and last
+                   15 % of frames of the inter-foot translation (> 2 mm), of its yaw
+                   (> 0.25 deg) and of each sole's tilt against the IMU's vertical
+                   (> 0.5 deg; one sole: that sole lifted; both alike: the IMU moved).
+
+Sizes for calibration: in the built-in recordings (A3-like, A2-like, G1, pair; weld,
+contact and kinematic; realistic and ideal sensors; paper offsets) noisy channels repeat
+a value for at most 5 frames; raw-encoder dispersion stays under 1 mm; the IMU's
+vertical sits within 1.3 deg of the soles (0.25 deg after the fit) and moves against
+them by 0.23 deg RMS; the first-to-last changes stay under 0.4 mm, 0.04 deg and 0.1 deg
+after the fit (`tests/estimation/test_datacheck.py` holds these on fresh recordings).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from legcal_bench.data.recording import Recording
+from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.geometry.lie import Log, frechet_mean, inverse
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
+
+
+@dataclass(frozen=True)
+class CheckLimits:
+    frozen_frames: int = 10
+    frozen_s: float = 0.2
+    dispersion_m: float = 0.005
+    swap_gain: float = 5.0
+    gravity_rad: float = np.deg2rad(3.0)
+    gravity_motion_rad: float = np.deg2rad(1.5)
+    coplanar_m: float = 0.02
+    coplanar_rad: float = np.deg2rad(10.0)
+    straight_knee_rad: float = np.deg2rad(5.0)
+    slide_m: float = 0.002
+    yaw_rad: float = np.deg2rad(0.25)
+    sole_tilt_rad: float = np.deg2rad(0.5)
+    end_fraction: float = 0.15
+    max_frames: int = 120  # per stance, for the column and IMU-axis searches
+
+
+LIMITS = CheckLimits()
+AXES = "xyz"
+
+
+def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarray | None = None,
+                  limits: CheckLimits = LIMITS) -> list[str]:
+    """Every check on `recordings`; the IMU and per-stance checks judge each stance on
+    the raw encoders and corrected by `dq` (the calibrator's estimate) and keep the
+    better fit, the column search runs on the raw encoders.
+
+    A finding hides its consequences: a stance with a frozen encoder or an unsteady
+    inter-foot transform gets no further kinematic checks, one with a frozen IMU or a
+    vertical inconsistent with the posture no tilt checks."""
+    dq = np.zeros(12) if dq is None else np.asarray(dq, dtype=float)
+    out: list[str] = []
+    frozen: dict[str, set[str]] = {}
+    for r in recordings:
+        msgs, kinds = frozen_channels(r, kin.legmap.joint_names, limits)
+        out += msgs
+        frozen[r.name] = kinds
+    for r in recordings:
+        if r.kind == "standing":
+            out += straight_knees(kin, r, limits)
+    support = [r for r in recordings if r.kind in ("stance", "standing") and _finite(r).sum() >= 10
+               and "encoder" not in frozen[r.name]]
+    msgs, unsteady = swapped_columns(kin, [r for r in support if r.kind == "stance"], dq, limits)
+    out += msgs
+    msgs, apart = soles_coplanar(kin, [r for r in support if r.name not in unsteady], dq, limits)
+    out += msgs
+    stances = [r for r in support if r.kind == "stance" and r.name not in unsteady | apart]
+    msgs, tilted = imu_axes(kin, [r for r in stances if "imu" not in frozen[r.name]], dq, limits)
+    out += msgs
+    for r in stances:
+        out += stance_changes(kin, r, dq, limits, tilt=r.name not in tilted and "imu" not in frozen[r.name])
+    return out
+
+
+def _finite(r: Recording) -> np.ndarray:
+    """Frames with finite values and an accelerometer that reads something."""
+    return (np.isfinite(r.q_enc).all(axis=1) & np.isfinite(r.imu_acc).all(axis=1) & np.isfinite(r.time)
+            & (np.linalg.norm(np.nan_to_num(r.imu_acc), axis=1) > 1.0))
+
+
+def _longest_run(x: np.ndarray) -> tuple[int, int]:
+    """(length, start) of the longest run of bit-identical consecutive values in x."""
+    change = np.flatnonzero(x[1:] != x[:-1]) + 1
+    bounds = np.concatenate([[0], change, [len(x)]])
+    lengths = np.diff(bounds)
+    i = int(np.argmax(lengths))
+    return int(lengths[i]), int(bounds[i])
+
+
+def frozen_channels(r: Recording, joint_names: list[str],
+                    limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
+    """Channels stuck on one value while the others move (a frozen encoder, a stalled
+    IMU or bus): the warnings, and which sensors ("encoder", "imu") were found stuck."""
+    enc_moves = np.r_[False, (np.diff(r.q_enc, axis=0) != 0).any(axis=1)]
+    groups = [(f"encoder {joint_names[j]}", r.q_enc[:, j], np.r_[False, (np.diff(np.delete(r.q_enc, j, axis=1),
+                                                                               axis=0) != 0).any(axis=1)])
+              for j in range(r.q_enc.shape[1])]
+    for label, data in (("IMU accelerometer", r.imu_acc), ("IMU gyro", r.imu_gyro)):
+        for a in range(3):
+            groups.append((f"{label} {AXES[a]}", data[:, a], enc_moves))
+    found: dict[str, list[str]] = {}
+    for label, x, others_move in groups:
+        n, start = _longest_run(x)
+        if n < limits.frozen_frames:
+            continue
+        t0, t1 = r.time[start], r.time[start + n - 1]
+        if t1 - t0 < limits.frozen_s or not others_move[start + 1:start + n].any():
+            continue
+        key = f"{t0:.2f}-{t1:.2f}"
+        found.setdefault(key, []).append(label)
+    out, kinds = [], set()
+    for key, labels in found.items():
+        kinds |= {"encoder" if lb.startswith("encoder") else "imu" for lb in labels}
+        t0, t1 = key.split("-")
+        what = ", ".join(labels)
+        cause = ("a frozen or disconnected encoder, or a logger repeating its last value" if labels[0].startswith(
+            "encoder") else "a stalled IMU or a logger repeating its last sample")
+        out.append(f"{r.name}: {what} read{'s' if len(labels) == 1 else ''} one unchanging value from t = {t0} to "
+                   f"{t1} s while the other channels move: likely {cause}; drop those frames or the channel's "
+                   "recording")
+    return out, kinds
+
+
+def straight_knees(kin: LegKinematics, r: Recording, limits: CheckLimits = LIMITS) -> list[str]:
+    """The straight-leg standing phase must read straight knees (within an offset's
+    size): the knee prior is taken from it."""
+    legmap = kin.legmap
+    out = []
+    for j, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
+        if role != "knee":
+            continue
+        q = np.nanmedian(r.q_enc[:, j])
+        if abs(q - legmap.knee_straight_rad) > limits.straight_knee_rad:
+            out.append(f"{r.name}: {name} reads {np.degrees(q - legmap.knee_straight_rad):+.1f} deg from straight "
+                       f"(knee_straight_rad {legmap.knee_straight_rad:g}) in the straight-leg standing phase: not "
+                       "a straight-leg phase, angles not in radians, or a wrong knee_straight_rad in the leg map; "
+                       "the knee prior taken from it would be wrong")
+    return out
+
+
+def soles_coplanar(kin: LegKinematics, recordings: list[Recording], dq: np.ndarray,
+                   limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
+    """In double support on a level floor both soles lie on one plane: the right sole's
+    height and tilt in the left sole's frame stay near zero (median over the frames,
+    raw or corrected, the better)."""
+    out, apart = [], set()
+    for r in recordings:
+        Q = r.q_enc[_subsample(r, limits.max_frames)]
+        best = None
+        for d in (np.zeros(12), dq):
+            C = frame_kinematics(kin, Q + d).C
+            z = float(np.median(C[:, 2, 3]))
+            tilt = float(np.median(np.arccos(np.clip(C[:, 2, 2], -1.0, 1.0))))
+            bad = max(abs(z) / limits.coplanar_m, tilt / limits.coplanar_rad)
+            if best is None or bad < best[0]:
+                best = (bad, z, tilt)
+        if best[0] > 1.0:
+            apart.add(r.name)
+            where = "above" if best[1] > 0 else "below"
+            out.append(f"{r.name}: the soles are not on one plane: the right sole sits {abs(best[1]) * 1e3:.0f} mm "
+                       f"{where} the left and is tilted {np.degrees(best[2]):.1f} deg against it (a good recording: "
+                       f"within a few mm and degrees): angles not in radians, columns in another order than "
+                       "joint_names, the wrong leg map, or not double support")
+    return out, apart
+
+
+def _subsample(r: Recording, n: int) -> np.ndarray:
+    idx = np.flatnonzero(_finite(r))
+    return idx[np.linspace(0, len(idx) - 1, min(n, len(idx))).round().astype(int)]
+
+
+def _dispersion(kin: LegKinematics, Qs: list[np.ndarray]) -> float:
+    """Largest per-stance median distance of the inter-foot translation from its median
+    (m): robust, so a short glitch (the contact filter's business) does not count."""
+    worst = 0.0
+    for Q in Qs:
+        C = frame_kinematics(kin, Q).C
+        tau = Log(inverse(frechet_mean(C, tol=1e-10)) @ C)[:, :3]
+        worst = max(worst, float(np.median(np.linalg.norm(tau - np.median(tau, axis=0), axis=1))))
+    return worst
+
+
+def _column_candidates(kin: LegKinematics) -> list[tuple[str, np.ndarray, np.ndarray]]:
+    """(description, column permutation, signs) for each plausible wiring mistake."""
+    names, roles = kin.legmap.joint_names, kin.legmap.joint_roles
+    side_cols = {s: [names.index(j.name) for j in kin.legmap.legs[s].joints] for s in kin.legmap.legs}
+    left, right = side_cols["left"], side_cols["right"]
+    ident, ones = np.arange(12), np.ones(12)
+    out = []
+    perm = ident.copy()
+    perm[left], perm[right] = right, left
+    out.append(("the left and right legs' columns are exchanged", perm, ones))
+    for a, b in itertools.combinations(range(6), 2):
+        both = ident.copy()
+        for cols in (left, right):
+            both[[cols[a], cols[b]]] = both[[cols[b], cols[a]]]
+        out.append((f"the {roles[left[a]]} and {roles[left[b]]} columns are exchanged on both legs", both, ones))
+        for side, cols in side_cols.items():
+            one = ident.copy()
+            one[[cols[a], cols[b]]] = one[[cols[b], cols[a]]]
+            out.append((f"{names[cols[a]]} and {names[cols[b]]} are exchanged", one, ones))
+    for j in range(12):
+        s = ones.copy()
+        s[j] = -1.0
+        out.append((f"{names[j]} reads with the opposite sign", ident, s))
+    return out
+
+
+def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
+                    limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
+    """The stances whose inter-foot transform is unsteady both on the raw encoders and
+    corrected by `dq`, with the wiring mistake that explains it if one does (searched on
+    the raw encoders: a wrong column order spoils the estimate)."""
+    Qs = {r.name: r.q_enc[_subsample(r, limits.max_frames)] for r in stances}
+    disp = {n: min(_dispersion(kin, [Q]), _dispersion(kin, [Q + dq])) for n, Q in Qs.items()}
+    unsteady = sorted(n for n, d in disp.items() if d > limits.dispersion_m)
+    if not unsteady:
+        return [], set()
+    now = max(disp[n] for n in unsteady)
+    msg = (f"{', '.join(unsteady)}: the inter-foot transform varies by up to {now * 1e3:.1f} mm (median) within "
+           "the stance, raw and calibrated (feet fixed: under 1 mm in a good recording)")
+    test = [Qs[n] for n in unsteady]
+    raw = max(_dispersion(kin, [Q]) for Q in test)
+    best = min(((d, _dispersion(kin, [Q[:, p] * s for Q in test])) for d, p, s in _column_candidates(kin)),
+               key=lambda x: x[1])
+    if best[1] * limits.swap_gain < raw:
+        msg += (f": likely {best[0]} (the raw transform is steady to {best[1] * 1e3:.1f} mm with that undone); "
+                "check joint_names against the logger's column order")
+    else:
+        msg += ": a foot moved, or the columns, units or leg map do not match the robot"
+    return [msg], set(unsteady)
+
+
+def _gravity_errors(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray) -> tuple[float, float]:
+    """(median angle, RMS of its moving part) between the IMU's vertical and the soles'
+    mean normal, both in the pelvis frame."""
+    fk = frame_kinematics(kin, Q)
+    n = fk.R_L[:, :, 2] + fk.R_R[:, :, 2]
+    n /= np.linalg.norm(n, axis=1, keepdims=True)
+    up = up_in_base(acc, kin.R_BI)
+    e = np.cross(n, up)
+    ang = np.arctan2(np.linalg.norm(e, axis=1), np.einsum("ni,ni->n", n, up))
+    moving = e - np.median(e, axis=0)
+    return float(np.median(ang)), float(np.sqrt((moving ** 2).sum(axis=1).mean()))
+
+
+def _signed_permutations():
+    for perm in itertools.permutations(range(3)):
+        for signs in itertools.product((1, -1), repeat=3):
+            P = np.zeros((3, 3))
+            P[range(3), perm] = signs
+            if not np.array_equal(P, np.eye(3)):
+                yield P
+
+
+def imu_axes(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
+             limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
+    """The IMU's vertical against the posture's: the warning and the stances it concerns,
+    with the permutation of the accelerometer's axes that explains it if one does. Like
+    the per-stance changes, each stance is judged on the raw encoders and with `dq`, and
+    the better fit counts."""
+    idx = [_subsample(r, limits.max_frames) for r in stances]
+    Qs = [[r.q_enc[i], r.q_enc[i] + dq] for r, i in zip(stances, idx)]
+    accs = [r.imu_acc[i] for r, i in zip(stances, idx)]
+
+    def badness(k, P=None):
+        a = accs[k] if P is None else accs[k] @ P.T
+        return min((max(ang / limits.gravity_rad, mov / limits.gravity_motion_rad), ang, mov)
+                   for ang, mov in (_gravity_errors(kin, Q, a) for Q in Qs[k]))
+
+    errs = [badness(k) for k in range(len(stances))]
+    bad = [k for k, e in enumerate(errs) if e[0] > 1.0]
+    if not bad:
+        return [], set()
+    k = max(bad, key=lambda k: errs[k][0])
+    names = ", ".join(stances[k].name for k in bad)
+    msg = (f"{names}: the IMU's vertical is up to {np.degrees(errs[k][1]):.1f} deg from the posture's (flat soles) "
+           f"and moves against it by up to {np.degrees(errs[k][2]):.2f} deg RMS (good data: under "
+           f"{np.degrees(limits.gravity_rad):g} and {np.degrees(limits.gravity_motion_rad):g} deg)")
+    now = max(errs[k][0] for k in bad)
+    P, b = min(((P, max(badness(k, P)[0] for k in bad)) for P in _signed_permutations()), key=lambda x: x[1])
+    if b <= 1.0 and b * 3 < now:
+        reading = ", ".join(f"{AXES[i]} = {'+' if P[i].sum() > 0 else '-'}logged {AXES[int(np.argmax(abs(P[i])))]}"
+                            for i in range(3))
+        msg += (f": likely permuted or flipped IMU axes (reading the accelerometer as {reading} fits); fix the "
+                "logger's axis order or the leg map's imu frame")
+    else:
+        msg += (": a wrong IMU mount rotation in the leg map (imu), a sloped floor, an IMU not rigid on the pelvis, "
+                "or a stance that is not static")
+    return [msg], {stances[k].name for k in bad}
+
+
+def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS,
+                   tilt: bool = True) -> list[str]:
+    """A gradual slide, yaw creep or a lifted heel: the change of the inter-foot
+    transform and (with `tilt`) of each sole's tilt against the IMU's vertical between
+    the stance's first and last frames. Each change is measured on the raw encoders and
+    with `dq`, and the smaller one counts: a real change shows in both, while offsets
+    (raw) or an estimate spoiled by other bad data (`dq`) show in one only. A lifted sole
+    explains the translation that comes with it, yaw creep the translation its rotation
+    carries."""
+    idx = np.flatnonzero(_finite(r))
+    m = max(1, int(round(limits.end_fraction * len(idx))))
+    if len(idx) < 2 * m + 1:
+        return []
+    first, last = slice(0, m), slice(len(idx) - m, len(idx))
+    up = up_in_base(r.imu_acc[idx], kin.R_BI)
+
+    def changes(d):
+        fk = frame_kinematics(kin, r.q_enc[idx] + d)
+        tau = Log(inverse(frechet_mean(fk.C, tol=1e-10)) @ fk.C)
+        p = fk.C[:, :3, 3]
+        ch = {"trans": p, "yaw": tau[:, 5:6]}
+        for side, R in (("left", fk.R_L), ("right", fk.R_R)):
+            ch[side] = np.einsum("nji,nj->ni", R, up)[:, :2]
+        out = {k: v[last].mean(axis=0) - v[first].mean(axis=0) for k, v in ch.items()}
+        out["distance"] = float(np.linalg.norm(p.mean(axis=0)))
+        return out
+
+    a, b = changes(np.zeros(12)), changes(dq)
+    c = {k: (a[k] if np.linalg.norm(a[k]) <= np.linalg.norm(b[k]) else b[k]) for k in a}
+    span = f"between its first and last {limits.end_fraction:.0%} of frames"
+    out = []
+    lifted = False
+    if tilt:
+        big = {s: c[s] for s in ("left", "right") if np.linalg.norm(c[s]) > limits.sole_tilt_rad}
+        alike = len(big) == 2 and (np.linalg.norm(c["left"] - c["right"])
+                                   < 0.5 * max(map(np.linalg.norm, big.values())))
+        if alike:
+            out.append(f"{r.name}: the IMU's vertical moved {np.degrees(np.linalg.norm(c['left'])):.2f} deg "
+                       f"against both soles alike {span}: likely an IMU drifting, stuck or not rigid on the pelvis")
+        else:
+            for side, v in big.items():
+                if abs(v[0]) >= abs(v[1]):
+                    what, axis = ("heel" if v[0] < 0 else "toe"), "pitch"
+                else:
+                    outer = (v[1] > 0) == (side == "left")
+                    what, axis = ("outer" if outer else "inner") + " edge", "roll"
+                out.append(f"{r.name}: the {side} sole's tilt against the IMU's vertical changed "
+                           f"{np.degrees(np.linalg.norm(v)):.2f} deg ({axis}) {span}: likely its {what} lifted and "
+                           "stayed lifted; drop the stance or the frames after the lift")
+                lifted = True
+    yaw = float(c["yaw"][0])
+    creep = abs(yaw) > limits.yaw_rad
+    if creep and not lifted:
+        out.append(f"{r.name}: the inter-foot yaw changed {np.degrees(yaw):+.2f} deg {span}: likely a foot "
+                   "creeping in yaw (turning on the floor); check the floor's friction, or drop the stance")
+    trans = float(np.linalg.norm(c["trans"]))
+    carried = abs(yaw) * c["distance"] if creep else 0.0
+    if not lifted and trans - carried > limits.slide_m:
+        axis = AXES[int(np.argmax(abs(c["trans"])))]
+        out.append(f"{r.name}: the feet moved {trans * 1e3:.1f} mm relative to each other {span} (mostly along "
+                   f"the left sole's {axis}): likely a foot sliding gradually; check the floor's friction, or drop "
+                   "the stance")
+    return out

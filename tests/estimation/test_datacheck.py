@@ -1,0 +1,175 @@
+"""Warnings derived from the data (issue #10): each defect a real log can carry is named
+with its stance, channel and likely cause by both calibrators, and clean recordings of
+every kind get none."""
+
+from __future__ import annotations
+
+import copy
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.data.recording import load_session
+from legcal_bench.estimation.datacheck import data_warnings
+from legcal_bench.protocol.collect import CollectConfig, collect
+from legcal_bench.robots import load_robot
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
+
+G1 = str(Path(__file__).resolve().parents[2] / "examples" / "unitree_g1.legmap.yaml")
+
+
+@pytest.fixture(scope="module")
+def sessions(tmp_path_factory):
+    """Clean weld recordings (realistic sensors, the paper's offsets) by robot, cached."""
+    cache = {}
+
+    def get(robot, **kw):
+        key = (robot, tuple(sorted(kw.items())))
+        if key not in cache:
+            out = tmp_path_factory.mktemp("clean") / "set"
+            collect(CollectConfig(robot=robot, heldout=0, standing_s=0.0, **kw), out, progress=False)
+            lm = load_robot(robot)
+            recs = load_session(out, robot=lm)
+            truth = np.load(out / "stance_I.truth.npz")["offsets"]
+            cache[key] = (lm, recs, truth)
+        return cache[key]
+    return get
+
+
+def _cols(lm, side):
+    return [lm.joint_names.index(j.name) for j in lm.legs[side].joints]
+
+
+def _role(lm, side, role):
+    return [i for i in _cols(lm, side) if lm.joint_roles[i] == role][0]
+
+
+def _move_left_sole(lm, recs, truth, twist):
+    """Encoders of a left sole that moves by `twist` (local [v, w], growing linearly over
+    stance II) while the pelvis holds: the leg's joints follow the sole Jacobian."""
+    kin = LegKinematics(lm)
+    r = recs[1]
+    J = frame_kinematics(kin, r.q_enc + truth).J_L
+    s = np.linspace(0.0, 1.0, r.n_frames)
+    for k in range(r.n_frames):
+        r.q_enc[k, _cols(lm, "left")] += np.linalg.lstsq(J[k], twist * s[k], rcond=None)[0]
+
+
+def _swap_legs(lm, recs, truth):
+    for r in recs:
+        r.q_enc = r.q_enc[:, _cols(lm, "right") + _cols(lm, "left")]
+
+
+def _swap_roll_yaw(lm, recs, truth):
+    p = np.arange(12)
+    for side in ("left", "right"):
+        a, b = _role(lm, side, "hip_roll"), _role(lm, side, "hip_yaw")
+        p[[a, b]] = p[[b, a]]
+    for r in recs:
+        r.q_enc = r.q_enc[:, p]
+
+
+def _reverse_knee(lm, recs, truth):
+    for r in recs:
+        r.q_enc[:, _role(lm, "right", "knee")] *= -1
+
+
+def _imu_axes(order):
+    def edit(lm, recs, truth):
+        for r in recs:
+            r.imu_acc = r.imu_acc[:, order]
+    return edit
+
+
+def _imu_flip_x(lm, recs, truth):
+    for r in recs:
+        r.imu_acc[:, 0] *= -1
+
+
+def _imu_stuck(lm, recs, truth):
+    r = recs[1]
+    r.imu_acc[200:400], r.imu_gyro[200:400] = r.imu_acc[200], r.imu_gyro[200]
+
+
+def _encoder_frozen(lm, recs, truth):
+    j = _role(lm, "left", "knee")
+    recs[2].q_enc[100:250, j] = recs[2].q_enc[100, j]
+
+
+def _heel_lifts(lm, recs, truth):
+    recs[1].q_enc[300:, _role(lm, "left", "ankle_pitch")] += np.deg2rad(2.0)
+
+
+def _slide(lm, recs, truth):
+    _move_left_sole(lm, recs, truth, np.array([0.006, 0, 0, 0, 0, 0]))
+
+
+def _yaw_creep(lm, recs, truth):
+    _move_left_sole(lm, recs, truth, np.array([0, 0, 0, 0, 0, np.deg2rad(0.8)]))
+
+
+# (defect, edit, the warning it must produce)
+DEFECTS = [
+    ("legs swapped", _swap_legs, r"stance_I, stance_II, stance_III, stance_IV: the inter-foot transform varies .*"
+                                 r"likely the left and right legs' columns are exchanged"),
+    ("hip roll/yaw swapped", _swap_roll_yaw, r"stance_I, .*likely the hip_roll and hip_yaw columns are exchanged "
+                                             r"on both legs"),
+    ("knee reversed", _reverse_knee, r"likely right_knee_joint reads with the opposite sign"),
+    ("IMU x<->z", _imu_axes([2, 1, 0]), r"stance_I, .*IMU's vertical .*likely permuted or flipped IMU axes .*"
+                                        r"x = \+logged z, y = \+logged y, z = \+logged x"),
+    ("IMU x<->y", _imu_axes([1, 0, 2]), r"likely permuted or flipped IMU axes .*x = \+logged y, y = \+logged x"),
+    ("IMU x reversed", _imu_flip_x, r"likely permuted or flipped IMU axes .*x = -logged x, y = \+logged y"),
+    ("IMU stuck", _imu_stuck, r"stance_II: IMU accelerometer x, IMU accelerometer y, IMU accelerometer z, IMU gyro x, "
+                              r"IMU gyro y, IMU gyro z read one unchanging value from t = 4.0\d to 8.00 s"),
+    ("encoder frozen", _encoder_frozen, r"stance_III: encoder left_knee_joint reads one unchanging value from "
+                                        r"t = 2.0\d to 5.00 s .*frozen or disconnected encoder"),
+    ("heel lifts", _heel_lifts, r"stance_II: the left sole's tilt against the IMU's vertical changed 1.\d\d deg "
+                                r"\(pitch\).*likely its heel lifted"),
+    ("gradual slide", _slide, r"stance_II: the feet moved [4-6].\d mm relative to each other.*left sole's x.*"
+                              r"sliding gradually"),
+    ("yaw creep", _yaw_creep, r"stance_II: the inter-foot yaw changed -0.[5-8]\d deg.*creeping in yaw"),
+]
+
+
+@pytest.mark.parametrize("robot", ["a3", G1], ids=["a3", "g1"])
+@pytest.mark.parametrize("calibrator", ["interfoot", "yamane"])
+@pytest.mark.parametrize("defect, edit, expected", DEFECTS, ids=[d[0] for d in DEFECTS])
+def test_each_defect_is_named_by_both_calibrators(sessions, robot, calibrator, defect, edit, expected):
+    lm, clean, truth = sessions(robot)
+    recs = copy.deepcopy(clean)
+    edit(lm, recs, truth)
+    res = get_calibrator(calibrator).calibrate(lm, recs)
+    kin = LegKinematics(lm)
+    found = data_warnings(kin, recs, res.offsets_vector(lm.joint_names))
+    assert found and set(found) <= set(res.warnings)
+    assert [w for w in found if re.search(expected, w)], found
+    # The root cause hides its consequences: one finding per defect (the frozen IMU
+    # and encoder are per stance too).
+    assert len(found) == 1, found
+
+
+@pytest.mark.parametrize("robot, kw", [
+    ("a3", {}), ("a2", {}), (G1, {}), ("pair_pry", {"sensors": "zero"}), ("a3", {"mode": "contact"}),
+    ("a2", {"mode": "contact"}), ("a3", {"mode": "kinematic", "sensors": "zero"}),
+    ("a3", {"offsets": "random:3", "seed": 5}), ("a2", {"offsets": "random:3", "seed": 5}),
+], ids=["a3", "a2", "g1", "pair-ideal", "a3-contact", "a2-contact", "a3-kinematic", "a3-random3", "a2-random3"])
+@pytest.mark.parametrize("calibrator", ["interfoot", "yamane"])
+def test_clean_recordings_get_no_data_warning(sessions, robot, kw, calibrator):
+    lm, recs, truth = sessions(robot, **kw)
+    res = get_calibrator(calibrator).calibrate(lm, recs)
+    assert data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names)) == []
+
+
+def test_a_five_frame_glitch_costs_five_frames(sessions):
+    """The contact filter's local mean is a median: a glitch removes itself only (a
+    moving average let 5 glitching frames push 127 of 300 over the thresholds)."""
+    lm, clean, truth = sessions("a3")
+    recs = copy.deepcopy(clean)
+    recs[1].q_enc[300:305, _role(lm, "left", "knee")] += 0.3
+    res = get_calibrator("interfoot").calibrate(lm, recs)
+    rep = res.diagnostics["filter"][1]
+    assert rep["rotation"] + rep["translation"] == 5 and rep["slip_splits"] == 0
+    assert not data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names))
