@@ -1,4 +1,4 @@
-"""`legcal-bench calibrate` and `score`."""
+"""`legcal-bench calibrate`, `check`, `score` and `export`."""
 
 from __future__ import annotations
 
@@ -111,6 +111,45 @@ def cmd_score(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_check(a: argparse.Namespace) -> int:
+    """Check a session set before (or after) calibrating: what each data check measures,
+    per recording, and the warnings it raises."""
+    from legcal_bench.calibrators.base import CalibrationResult
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.estimation.datacheck import LIMITS, data_warnings, statistics
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    legmap = load_robot(a.robot, a.mjcf)
+    recs = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
+    dq = CalibrationResult.load(a.result).offsets_vector(legmap.joint_names) if a.result else None
+    kin = LegKinematics(legmap)
+    stats = [statistics(kin, r, dq) for r in recs]
+    found = data_warnings(kin, recs, dq)
+    if a.json:
+        print(json.dumps({"robot": legmap.name, "offsets_from": a.result, "recordings": stats, "warnings": found},
+                         indent=2))
+        return 0
+    cols = [("longest_run_encoder", "enc run", "{:d}"), ("longest_run_imu", "imu run", "{:d}"),
+            ("dispersion_mm", "disp mm", "{:.2f}"), ("soles_height_mm", "soles mm", "{:+.1f}"),
+            ("soles_tilt_deg", "soles °", "{:.2f}"), ("gravity_deg", "grav °", "{:.2f}"),
+            ("gravity_motion_deg", "grav mov °", "{:.3f}"), ("slide_mm", "slide mm", "{:.2f}"),
+            ("yaw_deg", "yaw °", "{:+.3f}"), ("left_tilt_change_deg", "L tilt Δ°", "{:.3f}"),
+            ("right_tilt_change_deg", "R tilt Δ°", "{:.3f}")]
+    print(f"{'recording':12s} {'kind':9s} {'frames':>6s} " + " ".join(f"{h:>10s}" for _, h, _ in cols))
+    for st in stats:
+        print(f"{st['name'][:12]:12s} {st['kind']:9s} {st['frames']:6d} "
+              + " ".join(f"{f.format(st[k]) if k in st else '-':>10s}" for k, _, f in cols))
+    print(f"limits: identical run {LIMITS.frozen_frames} frames and {LIMITS.frozen_s} s; dispersion "
+          f"{LIMITS.dispersion_m * 1e3:g} mm; soles {LIMITS.coplanar_m * 1e3:g} mm, "
+          f"{np.degrees(LIMITS.coplanar_rad):g}°; gravity {np.degrees(LIMITS.gravity_rad):g}°, moving "
+          f"{np.degrees(LIMITS.gravity_motion_rad):g}°; slide {LIMITS.slide_m * 1e3:g} mm; yaw "
+          f"{np.degrees(LIMITS.yaw_rad):g}°; sole tilt change {np.degrees(LIMITS.sole_tilt_rad):g}° "
+          f"({'raw encoders and ' + a.result if a.result else 'raw encoders'}, the better fit)")
+    print("\n".join(["warnings:"] + [f"  - {w}" for w in found]) if found else "no data warnings")
+    return 0
+
+
 def cmd_export(a: argparse.Namespace) -> int:
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.robots import load_robot
@@ -154,6 +193,16 @@ def add_commands(sub) -> None:
     sc.add_argument("--json", action="store_true")
     sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
     sc.set_defaults(func=cmd_score)
+
+    ck = sub.add_parser("check", help="check a session set's data: frozen channels, swapped columns, IMU axes, "
+                                      "soles apart, slides, yaw creep, lifted heels (no calibration)")
+    robot_args(ck)
+    ck.add_argument("--bags", required=True, help="directory of recordings")
+    ck.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
+    ck.add_argument("--result", default=None, help="also judge the data corrected by this result's offsets "
+                                                   "(the calibrators do this with their own)")
+    ck.add_argument("--json", action="store_true")
+    ck.set_defaults(func=cmd_check)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
                                        "optionally a copy of its MJCF with the correction folded in")

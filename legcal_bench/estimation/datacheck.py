@@ -8,7 +8,7 @@ refusals (a deliberate effect stays possible); each names the stance, the channe
 size and the likely cause:
 
   frozen channel   an encoder or IMU channel reads bit-identical values for at least 10
-                   frames and 0.2 s while other channels move;
+                   frames and 0.2 s while another encoder moves by more than 2 mrad;
   swapped columns  with the feet fixed the inter-foot transform is constant: if it varies
                    by more than 5 mm (median distance from its median) within a stance,
                    every exchange of two columns, of the legs, and every reversed joint is
@@ -51,6 +51,7 @@ from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 class CheckLimits:
     frozen_frames: int = 10
     frozen_s: float = 0.2
+    moving_rad: float = 0.002  # another encoder's span during a frozen run: the robot moved
     dispersion_m: float = 0.005
     swap_gain: float = 5.0
     gravity_rad: float = np.deg2rad(3.0)
@@ -119,22 +120,23 @@ def _longest_run(x: np.ndarray) -> tuple[int, int]:
 
 def frozen_channels(r: Recording, joint_names: list[str],
                     limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
-    """Channels stuck on one value while the others move (a frozen encoder, a stalled
-    IMU or bus): the warnings, and which sensors ("encoder", "imu") were found stuck."""
-    enc_moves = np.r_[False, (np.diff(r.q_enc, axis=0) != 0).any(axis=1)]
-    groups = [(f"encoder {joint_names[j]}", r.q_enc[:, j], np.r_[False, (np.diff(np.delete(r.q_enc, j, axis=1),
-                                                                               axis=0) != 0).any(axis=1)])
+    """Channels stuck on one value while the robot moves (a frozen encoder, a stalled
+    IMU or bus): the warnings, and which sensors ("encoder", "imu") were found stuck.
+    "Moves" means another encoder spans more than `moving_rad` during the run, so a
+    quiet encoder holding one count while the robot stands still is not flagged."""
+    groups = [(f"encoder {joint_names[j]}", r.q_enc[:, j], [k for k in range(r.q_enc.shape[1]) if k != j])
               for j in range(r.q_enc.shape[1])]
     for label, data in (("IMU accelerometer", r.imu_acc), ("IMU gyro", r.imu_gyro)):
         for a in range(3):
-            groups.append((f"{label} {AXES[a]}", data[:, a], enc_moves))
+            groups.append((f"{label} {AXES[a]}", data[:, a], list(range(r.q_enc.shape[1]))))
     found: dict[str, list[str]] = {}
-    for label, x, others_move in groups:
+    for label, x, others in groups:
         n, start = _longest_run(x)
         if n < limits.frozen_frames:
             continue
         t0, t1 = r.time[start], r.time[start + n - 1]
-        if t1 - t0 < limits.frozen_s or not others_move[start + 1:start + n].any():
+        span = np.ptp(r.q_enc[start:start + n][:, others], axis=0)
+        if t1 - t0 < limits.frozen_s or not np.nanmax(span, initial=0.0) > limits.moving_rad:
             continue
         key = f"{t0:.2f}-{t1:.2f}"
         found.setdefault(key, []).append(label)
@@ -168,27 +170,33 @@ def straight_knees(kin: LegKinematics, r: Recording, limits: CheckLimits = LIMIT
     return out
 
 
+def coplanarity(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS) -> tuple[float, float]:
+    """(height, tilt): the right sole's median height (m) and tilt (rad) in the left
+    sole's frame, raw or corrected by `dq`, whichever is nearer one plane."""
+    Q = r.q_enc[_subsample(r, limits.max_frames)]
+    best = None
+    for d in (np.zeros(12), dq):
+        C = frame_kinematics(kin, Q + d).C
+        z = float(np.median(C[:, 2, 3]))
+        tilt = float(np.median(np.arccos(np.clip(C[:, 2, 2], -1.0, 1.0))))
+        bad = max(abs(z) / limits.coplanar_m, tilt / limits.coplanar_rad)
+        if best is None or bad < best[0]:
+            best = (bad, z, tilt)
+    return best[1], best[2]
+
+
 def soles_coplanar(kin: LegKinematics, recordings: list[Recording], dq: np.ndarray,
                    limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
     """In double support on a level floor both soles lie on one plane: the right sole's
-    height and tilt in the left sole's frame stay near zero (median over the frames,
-    raw or corrected, the better)."""
+    height and tilt in the left sole's frame stay near zero."""
     out, apart = [], set()
     for r in recordings:
-        Q = r.q_enc[_subsample(r, limits.max_frames)]
-        best = None
-        for d in (np.zeros(12), dq):
-            C = frame_kinematics(kin, Q + d).C
-            z = float(np.median(C[:, 2, 3]))
-            tilt = float(np.median(np.arccos(np.clip(C[:, 2, 2], -1.0, 1.0))))
-            bad = max(abs(z) / limits.coplanar_m, tilt / limits.coplanar_rad)
-            if best is None or bad < best[0]:
-                best = (bad, z, tilt)
-        if best[0] > 1.0:
+        z, tilt = coplanarity(kin, r, dq, limits)
+        if max(abs(z) / limits.coplanar_m, tilt / limits.coplanar_rad) > 1.0:
             apart.add(r.name)
-            where = "above" if best[1] > 0 else "below"
-            out.append(f"{r.name}: the soles are not on one plane: the right sole sits {abs(best[1]) * 1e3:.0f} mm "
-                       f"{where} the left and is tilted {np.degrees(best[2]):.1f} deg against it (a good recording: "
+            where = "above" if z > 0 else "below"
+            out.append(f"{r.name}: the soles are not on one plane: the right sole sits {abs(z) * 1e3:.0f} mm "
+                       f"{where} the left and is tilted {np.degrees(tilt):.1f} deg against it (a good recording: "
                        f"within a few mm and degrees): angles not in radians, columns in another order than "
                        "joint_names, the wrong leg map, or not double support")
     return out, apart
@@ -320,19 +328,18 @@ def imu_axes(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
     return [msg], {stances[k].name for k in bad}
 
 
-def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS,
-                   tilt: bool = True) -> list[str]:
-    """A gradual slide, yaw creep or a lifted heel: the change of the inter-foot
-    transform and (with `tilt`) of each sole's tilt against the IMU's vertical between
-    the stance's first and last frames. Each change is measured on the raw encoders and
-    with `dq`, and the smaller one counts: a real change shows in both, while offsets
-    (raw) or an estimate spoiled by other bad data (`dq`) show in one only. A lifted sole
-    explains the translation that comes with it, yaw creep the translation its rotation
-    carries."""
+def end_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS) -> dict | None:
+    """The change between a stance's first and last `end_fraction` of frames of the
+    inter-foot translation ("trans", m, in the left sole's frame), its yaw ("yaw", rad)
+    and each sole's tilt against the IMU's vertical ("left", "right": the up vector's
+    x, y in the sole frame), plus the feet's distance ("distance", m). Each is measured
+    on the raw encoders and with `dq`, and the smaller one counts: a real change shows in
+    both, while offsets (raw) or an estimate spoiled by other bad data (`dq`) show in one
+    only. None for a recording too short to tell."""
     idx = np.flatnonzero(_finite(r))
     m = max(1, int(round(limits.end_fraction * len(idx))))
     if len(idx) < 2 * m + 1:
-        return []
+        return None
     first, last = slice(0, m), slice(len(idx) - m, len(idx))
     up = up_in_base(r.imu_acc[idx], kin.R_BI)
 
@@ -348,7 +355,17 @@ def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: Che
         return out
 
     a, b = changes(np.zeros(12)), changes(dq)
-    c = {k: (a[k] if np.linalg.norm(a[k]) <= np.linalg.norm(b[k]) else b[k]) for k in a}
+    return {k: (a[k] if np.linalg.norm(a[k]) <= np.linalg.norm(b[k]) else b[k]) for k in a}
+
+
+def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS,
+                   tilt: bool = True) -> list[str]:
+    """A gradual slide, yaw creep or a lifted heel, from `end_changes` (tilts only with
+    `tilt`). A lifted sole explains the translation that comes with it, yaw creep the
+    translation its rotation carries."""
+    c = end_changes(kin, r, dq, limits)
+    if c is None:
+        return []
     span = f"between its first and last {limits.end_fraction:.0%} of frames"
     out = []
     lifted = False
@@ -382,4 +399,32 @@ def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: Che
         out.append(f"{r.name}: the feet moved {trans * 1e3:.1f} mm relative to each other {span} (mostly along "
                    f"the left sole's {axis}): likely a foot sliding gradually; check the floor's friction, or drop "
                    "the stance")
+    return out
+
+
+def statistics(kin: LegKinematics, r: Recording, dq: np.ndarray | None = None,
+               limits: CheckLimits = LIMITS) -> dict:
+    """What the checks measure on one recording, in display units (mm, deg), for
+    `legcal-bench check`: each figure is the one its check compares with its limit."""
+    dq = np.zeros(12) if dq is None else np.asarray(dq, dtype=float)
+    ok = _finite(r)
+    out: dict = {"name": r.name, "kind": r.kind, "frames": r.n_frames, "finite_frames": int(ok.sum()),
+                 "longest_run_encoder": max(_longest_run(r.q_enc[:, j])[0] for j in range(r.q_enc.shape[1])),
+                 "longest_run_imu": max(_longest_run(x[:, a])[0] for x in (r.imu_acc, r.imu_gyro) for a in range(3))}
+    if r.kind not in ("stance", "standing") or ok.sum() < 10:
+        return out
+    Q = r.q_enc[_subsample(r, limits.max_frames)]
+    out["dispersion_mm"] = 1e3 * min(_dispersion(kin, [Q]), _dispersion(kin, [Q + dq]))
+    z, tilt = coplanarity(kin, r, dq, limits)
+    out["soles_height_mm"], out["soles_tilt_deg"] = 1e3 * z, float(np.degrees(tilt))
+    acc = r.imu_acc[_subsample(r, limits.max_frames)]
+    ang, mov = min((_gravity_errors(kin, Q + d, acc) for d in (np.zeros(12), dq)),
+                   key=lambda e: max(e[0] / limits.gravity_rad, e[1] / limits.gravity_motion_rad))
+    out["gravity_deg"], out["gravity_motion_deg"] = float(np.degrees(ang)), float(np.degrees(mov))
+    c = end_changes(kin, r, dq, limits) if r.kind == "stance" else None
+    if c is not None:
+        out["slide_mm"] = 1e3 * float(np.linalg.norm(c["trans"]))
+        out["yaw_deg"] = float(np.degrees(c["yaw"][0]))
+        out["left_tilt_change_deg"] = float(np.degrees(np.linalg.norm(c["left"])))
+        out["right_tilt_change_deg"] = float(np.degrees(np.linalg.norm(c["right"])))
     return out

@@ -6,7 +6,9 @@ leg map alone: the servo gains in use and their source, how much each stance had
 shrink to fit, the hold check's largest excursions in weld and contact mode over the
 seeds (against its limits), and the weld-mode recovery of the default inter-foot
 calibration next to the robot's stiff-servo twin (the same robot with the A3-like
-robot's servos). Writes `report.md` and `report.json`.
+robot's servos), and what the data checks measure on these clean sets against their
+warning limits, with every warning they raise (false alarms). Writes `report.md` and
+`report.json`.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from tqdm import tqdm
 from legcal_bench.calibrators.base import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import LegcalError
+from legcal_bench.estimation.datacheck import LIMITS, data_warnings, statistics
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.reports import write_report
 from legcal_bench.protocol.collect import CollectConfig, collect
@@ -34,20 +37,33 @@ from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.hold import HOLD_LIMITS
 
 
-def _session(robot: str, mode: str, seed: int, folder: Path) -> tuple[dict, float | None]:
-    """(hold maxima over the segments, weld recovery RMS in deg or None)."""
+CHECKED = ("longest_run_encoder", "longest_run_imu", "dispersion_mm", "soles_height_mm", "soles_tilt_deg",
+           "gravity_deg", "gravity_motion_deg", "slide_mm", "yaw_deg", "left_tilt_change_deg", "right_tilt_change_deg")
+
+
+def _data_check(lm, recs, res) -> dict:
+    """The data checks on a clean session set with the calibrator's estimate: the
+    largest |statistic| over the recordings, and the warnings raised (false alarms)."""
+    kin = LegKinematics(lm)
+    dq = res.offsets_vector(lm.joint_names)
+    stats = [statistics(kin, r, dq) for r in recs]
+    worst = {k: max(abs(st[k]) for st in stats if k in st) for k in CHECKED}
+    return {"worst": worst, "warnings": data_warnings(kin, recs, dq)}
+
+
+def _session(robot: str, mode: str, seed: int, folder: Path) -> tuple[dict, float | None, dict]:
+    """(hold maxima over the segments, weld recovery RMS in deg or None, data checks)."""
     out = folder / f"{robot_label(robot)}_{mode}_{seed}"
     s = collect(CollectConfig(robot=robot, mode=mode, seed=seed), out, progress=False)
     holds = [g.hold for g in s.segments]
     hold = {"pelvis_mm": max(h["pelvis_mm"] for h in holds), "pelvis_limit_mm": holds[0]["pelvis_limit_mm"],
             "sole_move_mm": max(max(h["sole_move_mm"]) for h in holds),
             "sole_tilt_deg": max(max(h["sole_tilt_deg"]) for h in holds)}
-    recovery = None
-    if mode == "weld":
-        lm = load_robot(robot)
-        res = get_calibrator("interfoot").calibrate(lm, load_session(out, lm.joint_names))
-        recovery = score(str(out), res, lm)["recovery"]["rms_error_deg"]
-    return hold, recovery
+    lm = load_robot(robot)
+    recs = load_session(out, lm.joint_names)
+    res = get_calibrator("interfoot").calibrate(lm, recs)
+    recovery = score(str(out), res, lm)["recovery"]["rms_error_deg"] if mode == "weld" else None
+    return hold, recovery, _data_check(lm, recs, res)
 
 
 def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, extra: list[str] | None = None) -> str:
@@ -74,12 +90,13 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
                    "servo_source": sorted(set(g.source)), "servo_note": g.note,
                    "kp_knee": g.kp[lm.joint_roles.index("knee")],
                    "stance_scale": {s: fit_stance(st, kin).scale for s, st in STANCES.items()},
-                   "modes": {}, "recovery_deg": [], "twin_recovery_deg": []}
+                   "modes": {}, "recovery_deg": [], "twin_recovery_deg": [], "data_checks": {}}
             for mode in ("weld", "contact"):
-                holds = []
+                holds, checks = [], []
                 for seed in range(seeds):
                     try:
-                        hold, rec = _session(robot, mode, seed, tmp)
+                        hold, rec, check = _session(robot, mode, seed, tmp)
+                        checks.append(check)
                     except LegcalError as e:
                         hold, rec = {"error": str(e)}, None
                     holds.append(hold)
@@ -92,6 +109,10 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
                     **({k: max(h[k] for h in ok) for k in ("pelvis_mm", "sole_move_mm", "sole_tilt_deg")}
                        if ok else {}),
                     "pelvis_limit_mm": HOLD_LIMITS.pelvis_leg_fraction * kin.dims.leg_length * 1e3}
+                if checks:
+                    row["data_checks"][mode] = {
+                        "sets": len(checks), "worst": {k: max(c["worst"][k] for c in checks) for k in CHECKED},
+                        "warnings": [w for c in checks for w in c["warnings"]]}
             if twin is not None:
                 for seed in range(seeds):
                     row["twin_recovery_deg"].append(_session(twin, "weld", seed, tmp)[1])
@@ -129,6 +150,33 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
             + (f"{c['sole_move_mm']:.2f} / {c['sole_tilt_deg']:.3f}" if "sole_move_mm" in c else "FAILED")
             + f" | {np.mean(r['recovery_deg']):.3f} | "
             + (f"{np.mean(r['twin_recovery_deg']):.3f}" if r["twin_recovery_deg"] else "–") + " |")
+    lines += [
+        "",
+        "## Data checks on clean data (false alarms)",
+        "",
+        "The data checks (`legcal_bench.estimation.datacheck`, run by every built-in calibrator) on the same clean",
+        "sets, with the default inter-foot calibration's estimate: the largest |figure| over every recording and",
+        "seed next to its warning limit, and the warnings raised (each one a false alarm).",
+        "",
+        "| robot | mode | sets | identical run enc / imu (frames) | dispersion mm | soles mm / deg | gravity deg "
+        "/ moving | slide mm | yaw deg | sole tilt change deg | warnings |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| limit | | | {LIMITS.frozen_frames} / {LIMITS.frozen_frames} | {LIMITS.dispersion_m * 1e3:g} | "
+        f"{LIMITS.coplanar_m * 1e3:g} / {np.degrees(LIMITS.coplanar_rad):g} | {np.degrees(LIMITS.gravity_rad):g} / "
+        f"{np.degrees(LIMITS.gravity_motion_rad):g} | {LIMITS.slide_m * 1e3:g} | {np.degrees(LIMITS.yaw_rad):g} | "
+        f"{np.degrees(LIMITS.sole_tilt_rad):g} | |",
+    ]
+    for r in rows:
+        for mode, d in r["data_checks"].items():
+            w = d["worst"]
+            lines.append(
+                f"| {r['robot']} | {mode} | {d['sets']} | {w['longest_run_encoder']} / {w['longest_run_imu']} | "
+                f"{w['dispersion_mm']:.2f} | {w['soles_height_mm']:.1f} / {w['soles_tilt_deg']:.2f} | "
+                f"{w['gravity_deg']:.2f} / {w['gravity_motion_deg']:.2f} | {w['slide_mm']:.2f} | {w['yaw_deg']:.3f} | "
+                f"{max(w['left_tilt_change_deg'], w['right_tilt_change_deg']):.3f} | {len(d['warnings'])} |")
+    alarms = [(r["robot"], m, w) for r in rows for m, d in r["data_checks"].items() for w in d["warnings"]]
+    if alarms:
+        lines += ["", "False alarms:", ""] + [f"- {r} ({m}): {w}" for r, m, w in alarms]
     failures = [(r["robot"], m, e) for r in rows for m, v in r["modes"].items() for e in v["failed"]]
     if failures:
         lines += ["", "## Failed collections", ""] + [f"- {r} ({m}): {e}" for r, m, e in failures]

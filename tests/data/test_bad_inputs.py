@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -235,3 +236,149 @@ def test_the_four_default_stances_leave_nothing_undetermined(tmp_path, robot):
     assert not [w for w in res.warnings if "not determined" in w or "at the bound" in w], res.warnings
     post = res.diagnostics["posterior"]
     assert max(post["std_rad"].values()) < np.deg2rad(0.1)
+
+
+# ----------------------------------------------------------------- the CLI's refusals
+# Each bad invocation exits 2 with a message naming the field and the fix, never a
+# traceback, and writes no result.
+@pytest.mark.parametrize("args, message", [
+    (["--calibrator", "yamane", "--setting", "matched"], r"calibrator 'yamane' has no option \['setting'\]"),
+    (["--option", "foo=1"], r"has no option \['foo'\].*its options: setting"),
+    (["--option", "trim_fraction=1"], r"option trim_fraction=1: must be a number in \[0, 0.5\]"),
+    (["--option", "lambda_q=abc"], r"option lambda_q='abc': expected a number"),
+    (["--option", "lambda_q=-1"], r"option lambda_q=-1: must be a number in \[0, inf\]"),
+    (["--option", "n_max=0"], r"option n_max=0: must be an integer in \[1, inf\]"),
+    (["--option", "bound=0"], r"option bound=0: must be a number in \(0"),
+    (["--option", "lambda_q"], r"--option 'lambda_q': write key=value"),
+    (["--calibrator", "yamane", "--option", "w_h=-1"], r"option w_h=-1"),
+    (["--calibrator", "yamane", "--option", "n_max=0"], r"option n_max=0"),
+    (["--calibrator", "yamane", "--solver", "lm"], r"solver 'lm': use one of projected, sparse"),
+    (["--setting", "best"], r"setting 'best': use one of operating, sensor"),
+    (["--solver", "newton"], r"solver 'newton': use projected \(default\) or alternating"),
+    (["--calibrator", "nope"], r"unknown calibrator 'nope'; registered: \["),
+    (["--robot", "a9"], r"unknown robot 'a9': use a built-in name .* or the path of a leg-map YAML"),
+])
+def test_bad_calibrate_invocations_exit_2_naming_the_field(session, tmp_path, capsys, args, message):
+    out = tmp_path / "r.json"
+    assert main(["calibrate", "--bags", str(session), "--out", str(out), *args]) == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert "Traceback" not in err and not out.exists()
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: (d / "session.json").write_text("{garbage"), r"session.json: not valid JSON .*--allow-partial"),
+    (lambda d: (d / "session.json").write_text("[1, 2]"), r"field 'files' must list"),
+    (lambda d: _rewrite(d / "stance_I.npz", meta=lambda m: m["sensor_model"].update(gyro_noise_std=float("nan"))),
+     r"stance_I.npz: field 'sensor_model' is invalid .*field 'gyro_noise_std'"),
+    (lambda d: _rewrite(d / "stance_I.npz", meta=lambda m: m.update(robot="pair_pry")),
+     r"field 'robot' is 'pair_pry' but the leg map is 'a3'"),
+    (lambda d: (d / "stance_I.npz").write_bytes(b"not a zip"), r"stance_I.npz: not a readable .npz file"),
+    (lambda d: _rewrite(d / "stance_II.npz", arrays=lambda a: a.update(time=a["time"][::-1].copy())),
+     r"stance_II.npz: field 'time' is not strictly increasing .*sort the frames"),
+])
+def test_bad_session_sets_exit_2_naming_the_file_and_field(session, tmp_path, capsys, edit, message):
+    d = _copy(session, tmp_path)
+    edit(d)
+    out = tmp_path / "r.json"
+    assert main(["calibrate", "--robot", "a3", "--bags", str(d), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def a3_result(session, tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("result") / "r.json"
+    lm = load_robot("a3")
+    get_calibrator("interfoot").calibrate(lm, load_session(session, robot=lm)).save(out)
+    return out
+
+
+@pytest.mark.parametrize("setup, args, message", [
+    (None, ["--result", "{tmp}/none.json"], r"none.json: not a readable result JSON"),
+    (lambda tmp, res: (tmp / "bad.json").write_text("{"), ["--result", "{tmp}/bad.json"],
+     r"bad.json: not a readable result JSON"),
+    (None, ["--robot", "pair_pry"], r"calibrated for robot 'a3' but the leg map is 'pair_pry'"),
+    (lambda tmp, res: (tmp / "pp.json").write_text(json.dumps({**json.loads(res.read_text()), "robot": "pair_pry"})),
+     ["--result", "{tmp}/pp.json"], r"field 'robot' is 'a3' but the leg map is 'pair_pry'"),
+])
+def test_bad_score_invocations_exit_2_naming_the_field(session, a3_result, tmp_path, capsys, setup, args, message):
+    if setup:
+        setup(tmp_path, a3_result)
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    if "--result" not in args:
+        args += ["--result", str(a3_result)]
+    assert main(["score", "--bags", str(session), *args]) == 2
+    err = capsys.readouterr().err
+    assert re.search(message, err), err
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda p: p.write_bytes(b"garbage"), r"stance_I.truth.npz: not a readable .npz file"),
+    (lambda p: _rewrite(p, arrays=lambda a: a.update(offsets=np.full(12, np.nan))), r"field 'offsets' must be 12 finite"),
+    (lambda p: _rewrite(p, arrays=lambda a: a.update(offsets=np.zeros(11))), r"field 'offsets' must be 12 finite"),
+    (lambda p: _rewrite(p, arrays=lambda a: a.pop("q_true")), r"missing ground-truth fields \['q_true'\]"),
+])
+def test_bad_ground_truth_is_refused_by_score(session, a3_result, tmp_path, edit, message):
+    d = _copy(session, tmp_path)
+    edit(d / "stance_I.truth.npz")
+    with pytest.raises(RecordingError, match=message):
+        score(str(d), CalibrationResult.load(a3_result), load_robot("a3"))
+
+
+# -------------------------------------------------------------- arrays and metadata
+@pytest.mark.parametrize("edit, message", [
+    (dict(arrays=lambda a: a.update(time=np.r_[a["time"][:1], a["time"][:-1]])), "not strictly increasing"),
+    (dict(arrays=lambda a: a.update(time=np.zeros_like(a["time"]))), "not strictly increasing"),
+    (dict(arrays=lambda a: a["q_enc"].__setitem__((5, 3), np.nan)), r"field 'q_enc' has NaN/inf in 1 frame\(s\), "
+                                                                    r"first at frame 5"),
+    (dict(arrays=lambda a: a["imu_acc"].__setitem__((7, 0), np.inf)), r"field 'imu_acc' has NaN/inf"),
+    (dict(arrays=lambda a: a.update(q_enc=a["q_enc"][:, :11])), r"field 'q_enc' has shape \(\d+, 11\), expected "
+                                                               r"\(N, 12\)"),
+    (dict(arrays=lambda a: a.update(imu_acc=a["imu_acc"][:, :2])), r"field 'imu_acc' has shape"),
+    (dict(arrays=lambda a: a.update(imu_gyro=a["imu_gyro"][:-3])), r"field 'imu_gyro' has \d+ frames but 'time'"),
+    (dict(arrays=lambda a: a.update({k: a[k][:0] for k in ("time", "q_enc", "imu_acc", "imu_gyro")})), "no frames"),
+    (dict(arrays=lambda a: a.update(q_enc=a["q_enc"].astype(complex))), r"field 'q_enc' must be numeric"),
+    (dict(arrays=lambda a: a.update(imu_gyro=a["imu_gyro"] > 0)), r"field 'imu_gyro' must be numeric"),
+    (dict(arrays=lambda a: a.pop("q_enc")), r"missing field 'q_enc'"),
+    (dict(arrays=lambda a: a.update(imu_acc=a["imu_acc"] / 9.81)), r"mean norm 1; .*Convert from g"),
+    (dict(arrays=lambda a: a.update(q_enc=np.rad2deg(a["q_enc"]))), r"looks like degrees"),
+    (dict(arrays=lambda a: a.update(ft=np.zeros((len(a["time"]), 6)))), r"field 'ft' has shape"),
+    (dict(meta=lambda m: m.pop("kind")), r"missing metadata field 'kind'"),
+    (dict(meta=lambda m: m.update(kind="walking")), r"field 'kind' is 'walking'; use one of"),
+    (dict(meta=lambda m: m.update(format="rosbag")), r"field 'format' is 'rosbag'"),
+    (dict(meta=lambda m: m.update(version=2)), r"format version 2 is not supported"),
+    (dict(meta=lambda m: m.update(joint_names=m["joint_names"][:11])), r"must list the 12 leg joints, got 11"),
+    (dict(meta=lambda m: m.update(name=["stance"])), r"metadata field 'name' must be a string"),
+    (dict(meta=lambda m: m.update(sensor_model={"gyro_noise": 0.1})), r"unknown fields \['gyro_noise'\]"),
+])
+def test_more_bad_recordings_are_refused_naming_the_field(session, tmp_path, edit, message):
+    path = tmp_path / "stance_I.npz"
+    shutil.copy(session / "stance_I.npz", path)
+    _rewrite(path, **edit)
+    with pytest.raises(RecordingError, match=message):
+        load_recording(path)
+
+
+def test_joint_names_in_another_order_are_refused_with_the_fix(session, tmp_path):
+    path = tmp_path / "stance_I.npz"
+    shutil.copy(session / "stance_I.npz", path)
+    _rewrite(path, meta=lambda m: m.update(joint_names=m["joint_names"][6:] + m["joint_names"][:6]))
+    with pytest.raises(RecordingError, match="same names in another order: reorder the q_enc columns"):
+        load_recording(path, load_robot("a3").joint_names)
+
+
+@pytest.mark.parametrize("calibrator", ["interfoot", "yamane"])
+def test_a_standing_phase_in_degrees_below_2pi_is_flagged(session, calibrator):
+    """Degrees that stay below 2 pi pass the loader's unit check; the straight-leg
+    phase then reads bent knees and soles off one plane, and both calibrators say so."""
+    lm = load_robot("a3")
+    recs = load_session(session, robot=lm)
+    standing = [r for r in recs if r.kind == "standing"][0]
+    standing.q_enc = np.rad2deg(standing.q_enc)
+    assert np.abs(standing.q_enc).max() < 2 * np.pi
+    res = get_calibrator(calibrator).calibrate(lm, recs)
+    text = "\n".join(res.warnings)
+    assert re.search(r"standing: left_knee_joint reads \+\d+\.\d deg from straight .*not in radians", text), text
+    assert re.search(r"standing: the soles are not on one plane: the right sole sits \d+ mm", text), text

@@ -5,6 +5,7 @@ every kind get none."""
 from __future__ import annotations
 
 import copy
+import json
 import re
 from pathlib import Path
 
@@ -173,3 +174,40 @@ def test_a_five_frame_glitch_costs_five_frames(sessions):
     rep = res.diagnostics["filter"][1]
     assert rep["rotation"] + rep["translation"] == 5 and rep["slip_splits"] == 0
     assert not data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names))
+
+
+def test_a_quiet_encoder_holding_one_count_while_the_robot_stands_still_is_not_frozen(sessions):
+    """Frozen means unchanged while another encoder moves by more than 2 mrad: an encoder
+    whose noise is below one count reads one value through a still phase, legitimately."""
+    lm, clean, truth = sessions("a3")
+    recs = copy.deepcopy(clean)
+    still = recs[0]
+    k = _role(lm, "left", "knee")
+    hold = slice(0, 60)
+    still.q_enc[hold] = still.q_enc[0] + 1e-4 * np.sin(np.arange(60))[:, None]  # the others: noise only
+    still.q_enc[hold, k] = still.q_enc[0, k]
+    kin = LegKinematics(lm)
+    assert not data_warnings(kin, recs, truth)
+    # The same constant channel while the others sweep is a frozen encoder.
+    recs[0].q_enc[hold] = clean[0].q_enc[hold]
+    recs[0].q_enc[hold, k] = clean[0].q_enc[0, k]
+    assert re.search(r"stance_I: encoder left_knee_joint reads one unchanging value", "\n".join(
+        data_warnings(kin, recs, truth)))
+
+
+def test_check_command_prints_what_each_check_measures(sessions, tmp_path, capsys):
+    from legcal_bench.cli import main
+
+    out = tmp_path / "set"
+    collect(CollectConfig(robot="a3", heldout=0, stance_s=6.0), out, progress=False)
+    assert main(["check", "--robot", "a3", "--bags", str(out), "--json"]) == 0
+    d = json.loads(capsys.readouterr().out)
+    assert [r["name"] for r in d["recordings"]] == ["standing", "stance_I", "stance_II", "stance_III", "stance_IV"]
+    assert d["warnings"] == []
+    assert max(r["dispersion_mm"] for r in d["recordings"]) < 1.0
+    res = tmp_path / "r.json"
+    assert main(["calibrate", "--robot", "a3", "--bags", str(out), "--out", str(res)]) == 0
+    capsys.readouterr()
+    assert main(["check", "--robot", "a3", "--bags", str(out), "--result", str(res)]) == 0
+    text = capsys.readouterr().out
+    assert "disp mm" in text and "limits: identical run 10 frames" in text and "no data warnings" in text
