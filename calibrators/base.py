@@ -24,6 +24,8 @@ import numpy as np
 
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.imu_motion import IMU_MODES
+from legcal_bench.estimation.preprocess import PreprocessConfig
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.robots.legmap import LegMap
 
@@ -162,3 +164,15 @@ def number_option(name: str, value: Any, low: float | None = None, high: float |
     if bad:
         raise CalibrationError(f"option {name}={value!r}: must be {kind} in {rng}")
     return v
+
+
+def preprocess_options(n_max: Any, imu: Any, imu_window_s: Any) -> PreprocessConfig:
+    """The shared preprocessing options of calibrators built on `select_frames`, checked:
+    `n_max` configurations per stance, `imu` "compensated" (the IMU's acceleration
+    predicted from the leg angles removed; default) or "raw" (the paper's), and the
+    compensation's smoothing window in seconds."""
+    if imu not in IMU_MODES:
+        raise CalibrationError(f"option imu={imu!r}: use one of {', '.join(IMU_MODES)} (compensated: the IMU's "
+                               "motion acceleration removed; raw: the paper's setting)")
+    return PreprocessConfig(n_max=number_option("n_max", n_max, 1, integer=True), imu=imu,
+                            imu_window_s=number_option("imu_window_s", imu_window_s, 0.05, 10.0))

@@ -26,14 +26,15 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from legcal_bench import paper
-from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option, preprocess_options
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.datacheck import data_warnings
 from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
-from legcal_bench.estimation.preprocess import FilterReport, PreprocessConfig, filter_warnings, select_frames
+from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
+from legcal_bench.estimation.preprocess import FilterReport, filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
 from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
@@ -88,7 +89,8 @@ class InterFootCalibrator(Calibrator):
                  lambda_f: float | None = None, lambda_g: float | None = None, lambda_q: float | None = None,
                  lambda_knee: float | None = None, knee_prior_shift_rad: float = 0.0,
                  trim_fraction: float = paper.TRIM_FRACTION, bound: float = paper.OFFSET_BOUND_RAD,
-                 max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10):
+                 max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10,
+                 imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S):
         if setting not in SETTING_NAMES:
             raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in ("projected", "alternating"):
@@ -103,7 +105,7 @@ class InterFootCalibrator(Calibrator):
         self.bound = number_option("bound", bound, 0.0, np.pi, low_open=True)
         self.max_outer = number_option("max_outer", max_outer, 1, integer=True)
         self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
-        self.preprocess = PreprocessConfig(n_max=number_option("n_max", n_max, 1, integer=True))
+        self.preprocess = preprocess_options(n_max, imu, imu_window_s)
 
     @classmethod
     def benchmark_variants(cls) -> dict[str, dict]:
@@ -159,7 +161,8 @@ class InterFootCalibrator(Calibrator):
         segments: list[_Prepared] = []
         reports: list[FilterReport] = []
         for r in stances:
-            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess)
+            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess,
+                                      r.motion)
             reports.append(rep)
             for s in segs:
                 up = up_in_base(s.imu_acc, R_BI)

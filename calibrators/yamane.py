@@ -34,13 +34,14 @@ from dataclasses import asdict
 import numpy as np
 
 from legcal_bench import paper
-from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option
+from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option, preprocess_options
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.datacheck import data_warnings
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
-from legcal_bench.estimation.preprocess import PreprocessConfig, filter_warnings, select_frames
+from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
+from legcal_bench.estimation.preprocess import filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
 from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
@@ -59,7 +60,7 @@ class YamaneCalibrator(Calibrator):
 
     def __init__(self, weights: str = "default", w_h: float | None = None, w_imu: float | None = None,
                  n_max: int = paper.N_MAX_PER_STANCE, bound: float = paper.OFFSET_BOUND_RAD, tol: float = 1e-10,
-                 solver: str = "projected"):
+                 solver: str = "projected", imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S):
         if weights not in ("default", "sensor"):
             raise CalibrationError(f"weights {weights!r}: use default or sensor")
         if solver not in SOLVERS:
@@ -71,7 +72,7 @@ class YamaneCalibrator(Calibrator):
         self.w_imu_opt = None if w_imu is None else number_option("w_imu", w_imu, 0.0)
         self.bound = number_option("bound", bound, 0.0, np.pi, low_open=True)
         self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
-        self.preprocess = PreprocessConfig(n_max=number_option("n_max", n_max, 1, integer=True))
+        self.preprocess = preprocess_options(n_max, imu, imu_window_s)
 
     @classmethod
     def benchmark_variants(cls) -> dict[str, dict]:
@@ -79,7 +80,8 @@ class YamaneCalibrator(Calibrator):
 
     def settings(self) -> dict:
         return {"weights": self.weights, "w_h": self.w_h_opt, "w_imu": self.w_imu_opt, "bound": self.bound,
-                "n_max": self.preprocess.n_max, "solver": self.solver}
+                "n_max": self.preprocess.n_max, "solver": self.solver, "imu": self.preprocess.imu,
+                "imu_window_s": self.preprocess.imu_window_s}
 
     def _weights(self, recordings: list[Recording], kin: LegKinematics) -> tuple[float, float]:
         w_h, w_imu = 1000.0, 1000.0
@@ -99,7 +101,8 @@ class YamaneCalibrator(Calibrator):
         # The same frame selection as the inter-foot calibrator (same data for both).
         Q, acc, reports = [], [], []
         for r in stances:
-            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess)
+            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess,
+                                      r.motion)
             reports.append(rep)
             for s in segs:
                 Q.append(s.q_enc)

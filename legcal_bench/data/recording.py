@@ -25,6 +25,7 @@ from legcal_bench.sim.sensors import SensorModel
 FORMAT = "legcal-recording"
 VERSION = 1
 KINDS = ("standing", "stance", "heldout")
+MOTIONS = ("continuous", "static")
 MANIFEST = "session.json"
 
 
@@ -45,6 +46,9 @@ class Recording:
     ft: np.ndarray | None = None  # (N, 2, 6) ankle [force, torque], left then right
     source: str = "robot"  # "robot", or "sim:<mode>" for simulated data
     session: str = ""
+    # "continuous": logged while the posture moves (the accelerometer also reads the
+    # IMU's acceleration); "static": every frame logged at rest (it reads gravity alone).
+    motion: str = "continuous"
 
     @property
     def n_frames(self) -> int:
@@ -59,6 +63,7 @@ class Recording:
             "format": FORMAT, "version": VERSION, "name": self.name, "kind": self.kind,
             "stance": self.stance, "robot": self.robot, "joint_names": list(self.joint_names),
             "sensor_model": self.sensor_model.to_dict(), "source": self.source, "session": self.session,
+            "motion": self.motion,
         }
 
     def save(self, path: str | Path) -> Path:
@@ -126,6 +131,12 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         raise RecordingError(f"{where}: field 'format' is {meta['format']!r}, expected {FORMAT!r}")
     if meta["version"] != VERSION:
         raise RecordingError(f"{where}: format version {meta['version']} is not supported (this reader: {VERSION})")
+    for key in ("source", "session"):
+        if key in meta and not isinstance(meta[key], str):
+            raise RecordingError(f"{where}: metadata field '{key}' must be a string, got {meta[key]!r}")
+    if meta.get("motion", "continuous") not in MOTIONS:
+        raise RecordingError(f"{where}: field 'motion' is {meta['motion']!r}; use 'continuous' (logged while the "
+                             "posture moves) or 'static' (every frame logged at rest)")
     if meta["kind"] not in KINDS:
         raise RecordingError(f"{where}: field 'kind' is {meta['kind']!r}; use one of {KINDS}")
     names = list(meta["joint_names"])
@@ -220,6 +231,7 @@ def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Re
         imu_acc=arrays["imu_acc"].astype(float), imu_gyro=arrays["imu_gyro"].astype(float),
         sensor_model=sensor, ft=arrays["ft"].astype(float) if "ft" in arrays else None,
         source=meta.get("source", "robot"), session=meta.get("session", ""),
+        motion=meta.get("motion", "continuous"),
     )
 
 

@@ -1,6 +1,10 @@
 """Frame selection before the inter-foot solve (the paper's Data Preprocessing).
 
 Per contact segment, on the raw encoders (filtering is not repeated after correction):
+  0. beyond the paper, IMU motion compensation (`imu="compensated"`, the default): the
+     IMU's acceleration predicted from the leg angles is removed from the accelerometer
+     (`legcal_bench.estimation.imu_motion`) in recordings logged while moving (not in
+     those declared `motion: static`); `imu="raw"` is the paper's setting;
   1. drop frames with a non-finite value;
   2. gyro guard: drop frames whose IMU rate exceeds 0.5 rad/s; beyond the paper, an
      accelerometer guard: drop frames whose specific force is not within 50 % of g
@@ -26,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.cluster.vq import kmeans2
 
+from legcal_bench.estimation.imu_motion import IMU_WINDOW_S, compensate
 from legcal_bench.geometry.lie import Exp, Log, frechet_mean, inverse
 from legcal_bench.paper import (GYRO_GUARD_RAD_S, LOCAL_MEAN_WINDOW_S, N_MAX_PER_STANCE,
                                 ROTATION_RESIDUAL_MAX_DEG)
@@ -43,6 +48,8 @@ class PreprocessConfig:
     slip_jump_factor: float = 10.0
     n_max: int = N_MAX_PER_STANCE
     min_frames: int = 30
+    imu: str = "compensated"  # or "raw" (the paper's)
+    imu_window_s: float = IMU_WINDOW_S
 
 
 @dataclass
@@ -114,8 +121,13 @@ def _local_residuals(C: np.ndarray, times: np.ndarray, window_s: float) -> np.nd
 
 
 def select_frames(kin: LegKinematics, name: str, time: np.ndarray, q_enc: np.ndarray, imu_acc: np.ndarray,
-                  imu_gyro: np.ndarray, cfg: PreprocessConfig) -> tuple[list[Segment], FilterReport]:
+                  imu_gyro: np.ndarray, cfg: PreprocessConfig, motion: str = "continuous"
+                  ) -> tuple[list[Segment], FilterReport]:
+    """The frames of one recording chosen for the solve. `motion` is the recording's:
+    frames logged at rest ("static") need no IMU motion compensation."""
     rep = FilterReport(name=name, raw=len(time))
+    if cfg.imu == "compensated" and motion == "continuous":
+        imu_acc = compensate(kin, time, q_enc, imu_acc, cfg.imu_window_s)
     idx = np.arange(len(time))
     finite = np.all(np.isfinite(q_enc), axis=1) & np.all(np.isfinite(imu_acc), axis=1) & np.all(
         np.isfinite(imu_gyro), axis=1)

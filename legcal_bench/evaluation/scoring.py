@@ -20,6 +20,7 @@ import numpy as np
 from legcal_bench.calibrators.base import CalibrationResult
 from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import CalibrationError, RecordingError
+from legcal_bench.estimation.imu_motion import compensate
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.residuals import flat_ground_errors
 from legcal_bench.evaluation.metrics import rms
@@ -92,7 +93,8 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
         h0, h1, n0, n1, ht0, ht1, nt0, nt1 = ([] for _ in range(8))
         for p in held:
             rec = load_recording(p, names)
-            up = up_in_base(rec.imu_acc, R_BI)
+            acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
+            up = up_in_base(acc, R_BI)
             for store_h, store_n, corr in ((h0, n0, 0.0), (h1, n1, dq)):
                 h, a = _errors_at(kin, rec.q_enc + corr, up)
                 store_h.append(h)

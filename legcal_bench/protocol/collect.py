@@ -192,7 +192,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
                 time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],
-                sensor_model=sim.sensor, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session)
+                sensor_model=sim.sensor, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session,
+                motion="static" if cfg.mode == "kinematic" else "continuous")
             path = rec.save(folder / f"{name}.npz")
             Truth(
                 q_true=tr["q_true"], offsets=sim.offsets, sole_poses_world=tr["sole_poses_world"],

@@ -21,7 +21,8 @@ from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 
 ARRAYS = ("time", "q_enc", "imu_acc", "imu_gyro", "ft")
-META = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model", "source", "session")
+META = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model", "source", "session",
+        "motion")
 OUTCOMES = {"refused": 0, "calibrated": 0}
 
 
