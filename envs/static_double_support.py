@@ -69,7 +69,7 @@ from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
-from legcal_bench.sim.sensors import SensorModel, sensor_model
+from legcal_bench.sim.sensors import SensorModel, SimSensors, sim_sensors
 
 RESET_OPTIONS = ("stance", "jitter_m", "jitter_rad")
 
@@ -86,7 +86,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         robot: str | LegMap | None = None,
         mode: str = "kinematic",
         offsets: str | np.ndarray = "paper",
-        sensors: str | SensorModel | dict = "realistic",
+        sensors: str | SimSensors | SensorModel | dict = "realistic",
         sim_robot: str | LegMap | None = None,
         mjcf: str | None = None,
         rate_hz: float = 50.0,
@@ -105,7 +105,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         legmap = _as_legmap(robot, mjcf)
         sim_legmap = legmap if sim_robot is None else _as_legmap(sim_robot)
         self.sim = DoubleSupportSim(
-            legmap, mode, resolve_offsets(offsets, legmap, np.random.default_rng(offset_seed)), sensor_model(sensors),
+            legmap, mode, resolve_offsets(offsets, legmap, np.random.default_rng(offset_seed)), sim_sensors(sensors),
             sim_legmap=sim_legmap, rate_hz=rate_hz, physics_dt=physics_dt,
             knee_straight_error_rad=knee_straight_error_rad, settle_s=settle_s,
             servo_gains=servo_gains(sim_legmap) if mode != "kinematic" else None)

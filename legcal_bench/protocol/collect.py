@@ -27,7 +27,7 @@ from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
-from legcal_bench.sim.sensors import sensor_model
+from legcal_bench.sim.sensors import sim_sensors
 
 
 @dataclass
@@ -171,7 +171,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
     gains = servo_gains(sim_legmap) if cfg.mode != "kinematic" else None
     sim = DoubleSupportSim(
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
-        sensor_model(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
+        sim_sensors(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains)
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0])))
@@ -192,7 +192,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
                 time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],
-                sensor_model=sim.sensor, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session,
+                sensor_model=sim.sensor.model, ft=obs.get("ft"), source=f"sim:{cfg.mode}", session=session,
                 motion="static" if cfg.mode == "kinematic" else "continuous")
             path = rec.save(folder / f"{name}.npz")
             Truth(
@@ -202,7 +202,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
                 imu_true_gyro=tr["imu_true_gyro"],
                 meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
-                      "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets)},
+                      "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),
+                      "imu_errors": sim.sensor.errors.to_dict()},
             ).save(truth_path(path))
             files.append(path.name)
             summary.segments.append(SegmentSummary(
@@ -215,7 +216,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
                 motion_scale=motion_scale, hold=hold.to_dict()))
         bar.close()
         write_manifest(folder, {"robot": legmap.name, "mode": cfg.mode, "seed": cfg.seed,
-                                "sensor_model": sim.sensor.to_dict(), "files": files, "config": asdict(cfg),
+                                "sensor_model": sim.sensor.model.to_dict(), "files": files, "config": asdict(cfg),
                                 "servo_gains": summary.servo_gains,
                                 "stances": {g.name: {"stance": g.stance, "stance_scale": g.stance_scale,
                                                      "motion_scale": g.motion_scale, "hold": g.hold}

@@ -27,7 +27,7 @@ from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.scene import ServoGains, build_scene
-from legcal_bench.sim.sensors import sensor_model
+from legcal_bench.sim.sensors import sim_sensors
 
 GRAVITY = 9.81
 DEFAULT_KP_PER_MGL = {"hip_pitch": 6.0, "hip_roll": 6.0, "hip_yaw": 3.2, "knee": 8.0, "ankle_pitch": 3.2,
@@ -76,7 +76,7 @@ def _choose(legmap: LegMap) -> ServoGains:
     for i in [i for i, s in enumerate(source) if s == "none"]:
         kp[i], kd[i], source[i] = dkp[i], dkd[i], "default"
     if "MJCF" in source:
-        probe = DoubleSupportSim(legmap, "weld", np.zeros(12), sensor_model("zero"), settle_s=PROBE_SETTLE_S,
+        probe = DoubleSupportSim(legmap, "weld", np.zeros(12), sim_sensors("zero"), settle_s=PROBE_SETTLE_S,
                                  servo_gains=ServoGains(tuple(kp), tuple(kd), tuple(source)))
         pl = place(fit_stance(STANCES["I"], probe.true_kin).stance, probe.true_kin.dims)
         probe.reset(pl.left, pl.right, pl.nominal)

@@ -40,7 +40,7 @@ from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, p
 from legcal_bench.robots.kinematics import LegKinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
-from legcal_bench.sim.sensors import SensorModel
+from legcal_bench.sim.sensors import SimSensors
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -64,7 +64,7 @@ class DoubleSupportSim:
     `legmap` is the nominal robot (what the robot's software believes: IK targets come
     from it); `sim_legmap` the simulated one (default the same)."""
 
-    def __init__(self, legmap: LegMap, mode: str, offsets: np.ndarray, sensor: SensorModel,
+    def __init__(self, legmap: LegMap, mode: str, offsets: np.ndarray, sensor: SimSensors,
                  sim_legmap: LegMap | None = None, rate_hz: float = 50.0, physics_dt: float = 0.001,
                  knee_straight_error_rad: float = 0.005, settle_s: float = 3.0,
                  servo_gains: ServoGains | None = None):

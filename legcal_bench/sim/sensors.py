@@ -1,8 +1,14 @@
-"""The declared sensor model: one object, stored in every recording.
+"""Sensors: what a recording declares, and what the simulator realizes.
+
+`SensorModel` is the declaration stored in every recording: what a robot team knows
+from datasheets and their own characterization (noise levels, encoder resolution, and
+*bounds* on the IMU's bias and mounting tilt), never the realized bias or tilt, which
+no real log could know. `ImuErrors` holds the realized bias and mounting tilt; they live
+in the simulator (`SimSensors`) and in the ground truth only.
 
 Encoders: Gaussian noise, then quantization to the encoder resolution. IMU: the true
 specific force and angular rate in the nominal IMU frame, rotated into the actual
-(mounting-tilted) sensor frame, plus a constant bias and Gaussian noise.
+(mounting-tilted) sensor frame, plus the realized constant bias and Gaussian noise.
 """
 
 from __future__ import annotations
@@ -15,94 +21,163 @@ from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import SensorModelError
 
+G = 9.81  # m/s^2
+# Realized values that older recordings declared; a robot cannot know them.
+REALIZED_FIELDS = {"accel_bias": "accel_bias_bound", "gyro_bias": "gyro_bias_bound",
+                   "imu_mount_rpy": "imu_mount_bound"}
+
+
+def _numbers(cls, d: dict, what: str) -> dict:
+    """The fields of dataclass `cls` from `d`, checked: scalars finite and >= 0,
+    3-vectors finite."""
+    if not isinstance(d, dict):
+        raise SensorModelError(f"{what} must be a JSON object of its fields, got {d!r}")
+    known = {f.name for f in fields(cls)}
+    unknown = set(d) - known
+    if unknown:
+        raise SensorModelError(f"{what}: unknown fields {sorted(unknown)}; known: {sorted(known)}")
+    out = {}
+    for k, v in d.items():
+        vector = isinstance(getattr(cls, k), tuple)
+        try:
+            if isinstance(v, (bool, str)) or (isinstance(v, (list, tuple)) and any(isinstance(x, (bool, str))
+                                                                                   for x in v)):
+                raise ValueError
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            a = None
+        if vector and (a is None or a.shape != (3,) or not np.isfinite(a).all()):
+            raise SensorModelError(f"{what}: field '{k}' must be 3 finite numbers [x, y, z], got {v!r}")
+        if not vector and (a is None or a.shape != () or not np.isfinite(a) or a < 0):
+            raise SensorModelError(f"{what}: field '{k}' must be one finite number >= 0 (a standard deviation, "
+                                   f"resolution or bound in SI units), got {v!r}")
+        out[k] = tuple(float(x) for x in a) if vector else float(a)
+    return out
+
 
 @dataclass(frozen=True)
 class SensorModel:
+    """The declaration: what a robot team knows about its sensors."""
+
     encoder_noise_std: float = 0.0  # rad
     encoder_resolution: float = 0.0  # rad per count; 0 = no quantization
     accel_noise_std: float = 0.0  # m/s^2
-    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2
     gyro_noise_std: float = 0.0  # rad/s
-    gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad/s
-    imu_mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad, mounting tilt
     ft_force_noise_std: float = 0.0  # N, ankle force/torque sensors
     ft_torque_noise_std: float = 0.0  # N m
+    accel_bias_bound: float = 0.0  # m/s^2, per axis (datasheet)
+    gyro_bias_bound: float = 0.0  # rad/s, per axis
+    imu_mount_bound: float = 0.0  # rad, mounting tilt per axis (drawing tolerance or an IMU calibration)
 
     def to_dict(self) -> dict:
-        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+        return asdict(self)
+
+    @property
+    def tilt_bound(self) -> float:
+        """Bound on the IMU's static vertical error (rad): mounting tilt plus the
+        horizontal accelerometer bias over g."""
+        return self.imu_mount_bound + self.accel_bias_bound / G
 
     @classmethod
     def from_dict(cls, d: dict) -> "SensorModel":
-        known = {f.name for f in fields(cls)}
-        unknown = set(d) - known
-        if unknown:
-            raise SensorModelError(f"sensor model: unknown fields {sorted(unknown)}; known: {sorted(known)}")
-        out = {}
-        for k, v in d.items():
-            vector = isinstance(getattr(cls, k), tuple)
-            try:
-                if isinstance(v, (bool, str)) or (isinstance(v, (list, tuple)) and
-                                                  any(isinstance(x, (bool, str)) for x in v)):
-                    raise ValueError
-                a = np.asarray(v, dtype=float)
-            except (TypeError, ValueError):
-                a = None
-            if vector and (a is None or a.shape != (3,) or not np.isfinite(a).all()):
-                raise SensorModelError(f"sensor model: field '{k}' must be 3 finite numbers [x, y, z], got {v!r}")
-            if not vector and (a is None or a.shape != () or not np.isfinite(a) or a < 0):
-                raise SensorModelError(f"sensor model: field '{k}' must be one finite number >= 0 (a standard "
-                                       f"deviation or resolution in SI units), got {v!r}")
-            out[k] = tuple(float(x) for x in a) if vector else float(a)
-        return cls(**out)
+        if isinstance(d, dict):
+            realized = sorted(set(d) & set(REALIZED_FIELDS))
+            if realized:
+                raise SensorModelError(
+                    f"sensor model: fields {realized} are realized values (the IMU's actual bias or mounting tilt) "
+                    f"that a robot's log cannot know; declare bounds instead ({', '.join(REALIZED_FIELDS[k] for k in realized)}). "
+                    "Recordings collected before issue #11 carry them: re-collect them")
+        return cls(**_numbers(cls, d, "sensor model"))
+
+
+@dataclass(frozen=True)
+class ImuErrors:
+    """The realized IMU errors: in the simulator and the ground truth only."""
+
+    accel_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # m/s^2
+    gyro_bias: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad/s
+    imu_mount_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)  # rad, mounting tilt
+
+    def to_dict(self) -> dict:
+        return {k: list(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "ImuErrors":
+        return cls(**_numbers(cls, d, "IMU errors"))
 
     @cached_property
     def mount_rotation(self) -> np.ndarray:
         """Rotation of the actual IMU frame in the nominal IMU frame (computed once)."""
         return Rotation.from_euler("xyz", self.imu_mount_rpy).as_matrix()
 
+    def vertical(self, up_I: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+        """The up direction a static accelerometer reports, in the nominal IMU frame,
+        when the true one is `up_I` (noise-free): tilted by the mount, pulled by the bias."""
+        f = self.mount_rotation.T @ (G * np.asarray(up_I, dtype=float)) + np.asarray(self.accel_bias)
+        return f / np.linalg.norm(f)
+
+
+@dataclass(frozen=True)
+class SimSensors:
+    """The simulator's sensors: the declared model's noise with the realized errors."""
+
+    model: SensorModel = SensorModel()
+    errors: ImuErrors = ImuErrors()
+
     def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        q = q_true_minus_offset + self.encoder_noise_std * rng.standard_normal(q_true_minus_offset.shape)
-        if self.encoder_resolution > 0:
-            q = np.round(q / self.encoder_resolution) * self.encoder_resolution
+        m = self.model
+        q = q_true_minus_offset + m.encoder_noise_std * rng.standard_normal(q_true_minus_offset.shape)
+        if m.encoder_resolution > 0:
+            q = np.round(q / m.encoder_resolution) * m.encoder_resolution
         return q
 
     def imu(self, specific_force: np.ndarray, gyro: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        R = self.mount_rotation
-        acc = R.T @ specific_force + np.asarray(self.accel_bias) + self.accel_noise_std * rng.standard_normal(3)
-        gyr = R.T @ gyro + np.asarray(self.gyro_bias) + self.gyro_noise_std * rng.standard_normal(3)
+        R, e, m = self.errors.mount_rotation, self.errors, self.model
+        acc = R.T @ specific_force + np.asarray(e.accel_bias) + m.accel_noise_std * rng.standard_normal(3)
+        gyr = R.T @ gyro + np.asarray(e.gyro_bias) + m.gyro_noise_std * rng.standard_normal(3)
         return acc, gyr
 
     def force_torque(self, wrench: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """(2, 6) ankle wrenches [force, torque] with noise."""
-        std = np.array([self.ft_force_noise_std] * 3 + [self.ft_torque_noise_std] * 3)
+        std = np.array([self.model.ft_force_noise_std] * 3 + [self.model.ft_torque_noise_std] * 3)
         return wrench + std * rng.standard_normal(wrench.shape)
 
 
-SENSOR_PRESETS: dict[str, SensorModel] = {
+# A typical full-size humanoid: 17-bit absolute joint encoders with a little electrical
+# noise, a MEMS IMU (about 1 mrad of gravity-direction noise per sample).
+_NOISE = dict(encoder_noise_std=1e-4, encoder_resolution=2 * np.pi / 2**17, accel_noise_std=0.01,
+              gyro_noise_std=0.003, ft_force_noise_std=2.0, ft_torque_noise_std=0.2)
+SENSOR_PRESETS: dict[str, SimSensors] = {
     # Every effect off: encoders read q_true - offset exactly, the IMU reads the truth.
-    "zero": SensorModel(),
-    # A typical full-size humanoid: 17-bit absolute joint encoders with a little
-    # electrical noise, a MEMS IMU (about 1 mrad of gravity-direction noise per sample,
-    # a few mg of bias) mounted to within a tenth of a degree.
-    "realistic": SensorModel(
-        encoder_noise_std=1e-4,
-        encoder_resolution=2 * np.pi / 2**17,
-        accel_noise_std=0.01,
-        accel_bias=(0.02, -0.015, 0.01),
-        gyro_noise_std=0.003,
-        gyro_bias=(0.001, -0.0015, 0.0005),
-        imu_mount_rpy=(0.0015, -0.001, 0.0),
-        ft_force_noise_std=2.0,
-        ft_torque_noise_std=0.2,
-    ),
+    "zero": SimSensors(),
+    # An uncalibrated IMU: a few mg of bias, mounted to within a tenth of a degree
+    # (realized: 2.04 mrad of x bias over g plus 1.0 mrad of mounting pitch).
+    "realistic": SimSensors(
+        SensorModel(**_NOISE, accel_bias_bound=0.03, gyro_bias_bound=0.002, imu_mount_bound=0.002),
+        ImuErrors(accel_bias=(0.02, -0.015, 0.01), gyro_bias=(0.001, -0.0015, 0.0005),
+                  imu_mount_rpy=(0.0015, -0.001, 0.0))),
+    # The same IMU after an IMU calibration (bias and mounting estimated on a level
+    # reference): about 0.1 mrad of residual vertical error.
+    "calibrated-imu": SimSensors(
+        SensorModel(**_NOISE, accel_bias_bound=0.001, gyro_bias_bound=0.002, imu_mount_bound=0.0001),
+        ImuErrors(accel_bias=(0.0006, -0.0004, 0.01), gyro_bias=(0.001, -0.0015, 0.0005),
+                  imu_mount_rpy=(0.00005, -0.00004, 0.0))),
 }
 
 
-def sensor_model(spec: str | SensorModel | dict) -> SensorModel:
-    if isinstance(spec, SensorModel):
+def sim_sensors(spec: str | SimSensors | SensorModel | dict) -> SimSensors:
+    """A preset by name, or a declared model (as an object or dict) with no IMU errors."""
+    if isinstance(spec, SimSensors):
         return spec
+    if isinstance(spec, SensorModel):
+        return SimSensors(spec)
     if isinstance(spec, dict):
-        return SensorModel.from_dict(spec)
+        return SimSensors(SensorModel.from_dict(spec))
     if spec not in SENSOR_PRESETS:
         raise SensorModelError(f"unknown sensor preset {spec!r}; use one of {list(SENSOR_PRESETS)}")
     return SENSOR_PRESETS[spec]
+
+
+def sensor_model(spec: str | SimSensors | SensorModel | dict) -> SensorModel:
+    """The declared model of a preset or spec."""
+    return sim_sensors(spec).model

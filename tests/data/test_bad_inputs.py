@@ -78,8 +78,9 @@ def test_an_explicit_zero_weight_is_kept():
 
 @pytest.mark.parametrize("field, value", [
     ("encoder_noise_std", "a"), ("encoder_noise_std", [1, 2]), ("encoder_noise_std", -1e-3),
-    ("encoder_noise_std", True), ("gyro_noise_std", float("nan")), ("accel_bias", "abc"), ("accel_bias", [1, 2]),
-    ("accel_bias", [0, 0, float("inf")]), ("imu_mount_rpy", None),
+    ("encoder_noise_std", True), ("gyro_noise_std", float("nan")), ("accel_bias_bound", "abc"),
+    ("accel_bias_bound", [1, 2]), ("accel_bias_bound", float("inf")), ("imu_mount_bound", None),
+    ("imu_mount_bound", -1e-3),
 ])
 def test_sensor_model_fields_are_checked(field, value):
     with pytest.raises(SensorModelError, match=f"field '{field}'"):
@@ -90,7 +91,9 @@ def test_sensor_model_fields_are_checked(field, value):
     (dict(meta=lambda m: m.update(joint_names=True)), "field 'joint_names' must be a list"),
     (dict(meta=lambda m: m.update(joint_names=7)), "field 'joint_names' must be a list"),
     (dict(meta=lambda m: m.update(sensor_model=[1, 2])), "field 'sensor_model' must be a JSON object"),
-    (dict(meta=lambda m: m.update(sensor_model={"accel_bias": "x"})), "field 'sensor_model' is invalid"),
+    (dict(meta=lambda m: m.update(sensor_model={"accel_noise_std": "x"})), "field 'sensor_model' is invalid"),
+    (dict(meta=lambda m: m.update(sensor_model={"accel_bias": [0.02, 0, 0]})),
+     r"fields \['accel_bias'\] are realized values .* cannot know; declare bounds instead \(accel_bias_bound\)"),
     (dict(meta=lambda m: m.update(robot=3)), "metadata field 'robot' must be a string"),
     (dict(arrays=lambda a: a.update(time=a["time"] * 1e3)), r"field 'time' gives a logging rate of 0.05 Hz.*"
                                                             r"milliseconds or nanoseconds"),

@@ -23,7 +23,7 @@ def _rec(n=20, **kw):
     names = load_robot("a3").joint_names
     d = dict(name="s", kind="stance", stance="I", robot="a3", joint_names=names, time=np.arange(n) * 0.02,
              q_enc=np.full((n, 12), 0.1), imu_acc=np.tile([0, 0, 9.81], (n, 1)), imu_gyro=np.zeros((n, 3)),
-             sensor_model=SENSOR_PRESETS["realistic"])
+             sensor_model=SENSOR_PRESETS["realistic"].model)
     d.update(kw)
     return Recording(**d)
 

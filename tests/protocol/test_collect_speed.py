@@ -19,7 +19,7 @@ from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.sim.double_support import DoubleSupportSim, posture_ik
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import apply_servos, build_scene
-from legcal_bench.sim.sensors import sensor_model
+from legcal_bench.sim.sensors import sim_sensors
 
 JITTER = (0.015, 0.05)
 
@@ -27,7 +27,7 @@ JITTER = (0.015, 0.05)
 def _sim(mode: str, sim_legmap=None) -> DoubleSupportSim:
     legmap = load_robot("a3")
     return DoubleSupportSim(legmap, mode, resolve_offsets("paper", legmap, np.random.default_rng(0)),
-                            sensor_model("realistic"), sim_legmap=sim_legmap, settle_s=1.0)
+                            sim_sensors("realistic"), sim_legmap=sim_legmap, settle_s=1.0)
 
 
 def _reset(sim: DoubleSupportSim, stance: str, seed: int):
