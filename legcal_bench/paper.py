@@ -45,6 +45,8 @@ CONTACT_FLOOR_RMS_DEG = 0.121
 A3_SIM_TABLE = dict(rms_deg=0.120, max_deg=0.274, kappa_H_reg=1.11e4)  # Table I, one squat stance, 450 frames
 
 # --- §V-C Real-machine results (Table II): base offsets (deg), left leg then right, platform order.
+A2_PLATFORM_ORDER = ("hip_roll", "hip_yaw", "hip_pitch", "knee", "ankle_pitch", "ankle_roll")
+A3_PLATFORM_ORDER = ("hip_pitch", "hip_roll", "hip_yaw", "knee", "ankle_pitch", "ankle_roll")
 A2_BASE_DEG = (0.430, -1.127, 0.244, 1.154, -0.450, 0.020, 0.521, 1.115, 0.735, 0.380, -0.858, -1.386)
 A3_BASE_DEG = (1.035, 0.495, 0.273, -0.208, -0.850, 0.340, 1.001, -0.588, -0.194, -0.090, 0.024, 0.427)
 REAL_PAIRED_DELTA_RMS_DEG = {"a2": 0.012, "a3": 0.061}

@@ -2,9 +2,11 @@
 
 A plan is robots x modes x seeds x offset scales x calibrator variants. For each
 (robot, mode, seed, scale) two session sets are collected with the same placements,
-motions and noise: `native` (the robot's own factory residual, drawn at random, a few
-tenths of a degree; nothing injected) and `injected` (native + the paper's injection x
-scale). Calibrators come from the registry (entry-point group); a class may offer
+motions and noise: `native` (the robot's own factory residual, by default drawn
+uniformly in +-1.2 deg per joint, 0.69 deg RMS, the scale of the paper's real robots'
+0.57-0.81 deg; nothing injected) and `injected` (native + the paper's injection x
+scale). The native spec is a collection override like the others (`native`:
+`random:<deg>`, `paper-base`, `none`). Calibrators come from the registry (entry-point group); a class may offer
 `benchmark_variants()` (name -> options), else it runs once as "default".
 
 Each cell has a resume key: a hash of the calibrator's settings, the two session sets'
@@ -29,7 +31,7 @@ from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots import available, load_robot, resolve_robot, robot_label
 from legcal_bench.sim.offsets import paper_injection, resolve_offsets
 
-NATIVE_DEG = 0.3  # factory residual: offsets drawn uniformly in +-0.3 deg
+NATIVE = "random:1.2"  # factory residual: offsets drawn uniformly in +-1.2 deg (was +-0.3 before issue #11)
 NATIVE_SEED_BASE = 10_000  # the native offsets of seed s come from default_rng(NATIVE_SEED_BASE + s)
 
 
@@ -57,23 +59,25 @@ class Dataset:
     def offsets(self) -> np.ndarray:
         """The true offsets of this session set: native, plus scale x the paper's injection."""
         legmap = self.legmap()
-        dq = resolve_offsets(f"random:{NATIVE_DEG}", legmap, np.random.default_rng(NATIVE_SEED_BASE + self.seed))
+        native = dict(self.collect).get("native", NATIVE)
+        dq = resolve_offsets(native, legmap, np.random.default_rng(NATIVE_SEED_BASE + self.seed))
         if self.injection == "injected":
             dq = dq + self.scale * paper_injection(legmap)
         return dq
 
     def config(self) -> CollectConfig:
+        overrides = {k: v for k, v in self.collect if k != "native"}
         return CollectConfig(robot=resolve_robot(self.robot), mode=self.mode, seed=self.seed,
-                             offsets=tuple(float(v) for v in self.offsets()), **dict(self.collect))
+                             offsets=tuple(float(v) for v in self.offsets()), **overrides)
 
 
 def _short(value) -> str:
     """A collection override's value in a folder name: numbers as %g, stances joined by
-    "-", an MJCF by its file name without the suffix."""
+    "-", an MJCF by its file name without the suffix, other words without colons."""
     if isinstance(value, (tuple, list)):
         return "-".join(str(v) for v in value)
     if isinstance(value, str):
-        return Path(value).stem
+        return Path(value).stem if "/" in value or value.endswith(".xml") else value.replace(":", "")
     return f"{value:g}"
 
 

@@ -76,6 +76,17 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
         if unknown:
             raise ConfigError(f"--stances {unknown}: use stances from {list(STANCES)}")
         out["stances"] = tuple(a.stances)
+    if a.sensors is not None:
+        from legcal_bench.sim.sensors import sim_sensors
+
+        sim_sensors(a.sensors)  # an unknown preset fails here, naming the presets
+        out["sensors"] = a.sensors
+    if a.native is not None:
+        from legcal_bench.robots import load_robot
+        from legcal_bench.sim.offsets import resolve_offsets
+
+        resolve_offsets(a.native, load_robot("a3"), np.random.default_rng(0))  # a bad spec fails here
+        out["native"] = a.native
     return out
 
 
@@ -86,6 +97,10 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names")
     p.add_argument("--stances", nargs="+", default=None,
                    help="stances to record, as in collect (default: I II III IV); held-out sessions follow them")
+    p.add_argument("--sensors", default=None, help="sensor preset, as in collect (default: the suite's, realistic)")
+    p.add_argument("--native", default=None,
+                   help="the robots' own (factory) offsets under the injection: random:<deg> (default random:1.2, "
+                        "uniform per joint), paper-base (the paper's real robots' base offsets), none")
 
 
 def cmd_leaderboard(a: argparse.Namespace) -> int:

@@ -11,15 +11,30 @@ from typing import Sequence
 import numpy as np
 
 from legcal_bench.errors import OffsetSpecError
-from legcal_bench.paper import INJECTION_RAD
+from legcal_bench.paper import A2_BASE_DEG, A2_PLATFORM_ORDER, A3_BASE_DEG, A3_PLATFORM_ORDER, INJECTION_RAD
 from legcal_bench.robots.legmap import LegMap
 
-PRESETS_HELP = "none | paper | random:<deg> | twelve comma-separated radians (leg-map order)"
+PRESETS_HELP = "none | paper | paper-base | random:<deg> | twelve comma-separated radians (leg-map order)"
 
 
 def paper_injection(legmap: LegMap) -> np.ndarray:
     """The paper's injection (rad) on this robot's 12 leg joints, by role."""
     return np.array([INJECTION_RAD[r] for r in legmap.joint_roles])
+
+
+def paper_base(legmap: LegMap) -> np.ndarray:
+    """The paper's real robots' base offsets (Table II, rad) on this robot, by role: the
+    A3's for a hip-pitch-first ordering, the A2's otherwise."""
+    if legmap.hip_order[0] == "hip_pitch":
+        order, table = A3_PLATFORM_ORDER, A3_BASE_DEG
+    else:
+        order, table = A2_PLATFORM_ORDER, A2_BASE_DEG
+    sides = list(legmap.legs)
+    out = np.empty(12)
+    for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
+        side = next(k for k, s in enumerate(sides) if name in [j.name for j in legmap.legs[s].joints])
+        out[i] = np.deg2rad(table[6 * side + order.index(role)])
+    return out
 
 
 def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
@@ -39,6 +54,8 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
         return np.zeros(12)
     if s == "paper":
         return paper_injection(legmap)
+    if s == "paper-base":
+        return paper_base(legmap)
     if s.startswith("random:"):
         try:
             deg = float(s.split(":", 1)[1])

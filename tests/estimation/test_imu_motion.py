@@ -4,7 +4,6 @@ the accelerometer's motion error down to the kinematics'."""
 
 from __future__ import annotations
 
-import copy
 
 import numpy as np
 import pytest
