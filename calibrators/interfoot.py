@@ -30,13 +30,14 @@ from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.datacheck import data_warnings
-from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.levelling import levelling_rotations, tilted, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
 from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.preprocess import FilterReport, filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
-from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
+from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
+                                                 uncertainty_warnings)
 from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
                                            TikhonovTerm)
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
@@ -133,6 +134,24 @@ class InterFootCalibrator(Calibrator):
         J = J[:whitened.n_data_rows]
         return posterior(J.T @ J, robot.joint_names, robot.joint_roles, signs)
 
+    def _tilt_response(self, problem: "_InterFootProblem", dq: np.ndarray, eps: float = 1e-3) -> np.ndarray:
+        """(12, 2) how the estimate moves per rad of a fixed error of the IMU's vertical
+        about the pelvis x and y axes: the same problem re-solved, from `dq`, with every
+        up vector tilted by `eps` (the response is linear at this size)."""
+        base = problem.segments
+        V = np.zeros((12, 2))
+        for axis in range(2):
+            segs = []
+            for s in base:
+                up = tilted(s.up_B, axis, eps)
+                segs.append(replace(s, up_B=up, R_WB=levelling_rotations(up)))
+            problem.build(segs)
+            moved, _ = problem.solve(dq, self)
+            V[:, axis] = (moved - dq) / eps
+        problem.build(base)
+        problem.means_at(dq)
+        return V
+
     # ------------------------------------------------------------------ setup
     def weights_for(self, legmap: LegMap, recordings: list[Recording] | None = None) -> tuple[str, InterFootWeights]:
         if self.setting == "sensor":
@@ -211,6 +230,8 @@ class InterFootCalibrator(Calibrator):
         post = self._posterior(kin, robot, stances, problem, dq, signs)
         if post is not None:
             warnings += uncertainty_warnings(post)
+        tilt_response = self._tilt_response(problem, dq)
+        warnings += imu_tilt_warnings(tilt_response, stances[0].sensor_model.tilt_bound, signs)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)
         t_obs = time.perf_counter() - t2
@@ -230,6 +251,7 @@ class InterFootCalibrator(Calibrator):
                 "history_first_solve": hist1, "history_after_trim": hist2,
                 "pitch_signs": signs.tolist(),
                 "posterior": post if post is not None else {"note": NO_NOISE},
+                "imu_tilt_response": tilt_response.tolist(),
             },
             timing_s={"preprocess": t_pre, "solve": t_solve, "observability": t_obs,
                       "total": time.perf_counter() - t0},

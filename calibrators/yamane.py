@@ -38,13 +38,14 @@ from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.datacheck import data_warnings
-from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.estimation.levelling import tilted, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.preprocess import filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
-from legcal_bench.estimation.uncertainty import NO_NOISE, bound_warnings, posterior, uncertainty_warnings
+from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
+                                                 uncertainty_warnings)
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
@@ -137,6 +138,14 @@ class YamaneCalibrator(Calibrator):
                                [SoleHeightTerm(kin, Q, 1.0 / sig["height"]), ImuTiltTerm(up, 1.0 / sig["tilt"])])
             post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
             warnings += uncertainty_warnings(post)
+        tilt_response = np.zeros((12, 2))
+        eps = 1e-3
+        for axis in range(2):
+            moved = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
+                            [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(tilted(up, axis, eps), w_imu)])
+            x = moved.solve(sol.x, method=SOLVERS[self.solver], tol=self.tol, max_nfev=100).x
+            tilt_response[:, axis] = (moved.unpack(x)[OFFSETS] - dq) / eps
+        warnings += imu_tilt_warnings(tilt_response, stances[0].sensor_model.tilt_bound, signs)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)
         return CalibrationResult(
@@ -146,7 +155,8 @@ class YamaneCalibrator(Calibrator):
             conditioning=conditioning,
             diagnostics={"frames_used": int(n), "w_h": w_h, "w_imu": w_imu, "filter": [asdict(r) for r in reports],
                          "cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status),
-                         "posterior": post if post is not None else {"note": NO_NOISE}},
+                         "posterior": post if post is not None else {"note": NO_NOISE},
+                         "imu_tilt_response": tilt_response.tolist()},
             timing_s={"preprocess": t1 - t0, "solve": t_solve, "total": time.perf_counter() - t0},
             settings=self.settings(),
             warnings=warnings,

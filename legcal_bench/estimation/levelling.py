@@ -33,3 +33,13 @@ def levelling_rotations(up_B: np.ndarray) -> np.ndarray:
     out[aligned & (c > 0)] = np.eye(3)
     out[aligned & (c <= 0)] = np.diag([1.0, -1.0, -1.0])
     return out
+
+
+def tilted(up_B: np.ndarray, axis: int, angle: float) -> np.ndarray:
+    """The up vectors rotated by `angle` (rad) about pelvis axis `axis` (0 x, 1 y): what
+    an IMU whose vertical is off by that rotation would report."""
+    c, s = np.cos(angle), np.sin(angle)
+    R = np.eye(3)
+    i, j = [(1, 2), (2, 0)][axis]
+    R[i, i], R[i, j], R[j, i], R[j, j] = c, -s, s, c
+    return np.asarray(up_B) @ R.T

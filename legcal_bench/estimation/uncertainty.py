@@ -14,6 +14,7 @@ import numpy as np
 
 from legcal_bench.estimation.observability import describe_combination
 from legcal_bench.robots.design import PITCH_ROLES
+from legcal_bench.robots.kinematics import pitch_sums
 
 STD_LIMIT_RAD = float(np.deg2rad(0.1))  # a combination known worse than this is "not determined"
 NO_NOISE = "the recordings declare no sensor noise: no posterior standard deviations"
@@ -80,3 +81,23 @@ def bound_warnings(dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
     return ([f"offsets at the bound ±{np.rad2deg(bound):.2f}°: {at}: the data push them further than the bound "
              "allows (offsets that large, data that do not determine them, or the wrong robot/leg map); the "
              "values are not estimates"] if at else [])
+
+
+def imu_tilt_warnings(response: np.ndarray, tilt_bound: float, signs: np.ndarray) -> list[str]:
+    """What the IMU's declared tilt bound leaves undetermined: a fixed error of its
+    vertical moves the offsets by `response` (12, 2) per rad (about the pelvis x, y
+    axes), which no static level-ground data can tell apart. A warning when the bound
+    moves a pitch sum by more than `STD_LIMIT_RAD`."""
+    if tilt_bound <= 0:
+        return []
+    moved = {k: max(abs(v) for v in pitch_sums(response[:, a] * tilt_bound, signs).values()) for k, a in
+             (("roll", 0), ("pitch", 1))}
+    out = []
+    for axis, size in moved.items():
+        if size > STD_LIMIT_RAD:
+            out.append(f"IMU tilt not separable: the IMU's {axis} tilt, declared within ±{tilt_bound * 1e3:.2f} "
+                       f"mrad (mount plus bias over g), moves the pitch sums by up to ±{np.rad2deg(size):.2f}° "
+                       f"(limit {np.rad2deg(STD_LIMIT_RAD):g}°): static level-ground data cannot tell a fixed IMU "
+                       "tilt from offsets; calibrate the IMU (its mounting and accelerometer bias) and declare the "
+                       "smaller bound")
+    return out

@@ -1,7 +1,12 @@
 """Scoring a calibration result against the simulator's ground truth.
 
 recovery: signed per-joint error e_i = dq_hat_i - dq_inject_i, its RMS and maximum,
-    and the errors of the pitch sums s_L, s_R, s_R - s_L.
+    and the errors of the pitch sums s_L, s_R, s_R - s_L. With the result's
+    `imu_tilt_response` (how its estimate moves per rad of IMU tilt) and the truth's
+    realized IMU errors: `imu_tilt_mrad` (the IMU's true vertical error about the pelvis
+    x, y axes), `imu_share_rms_deg` (the offsets it moves, which no static level-ground
+    data can separate) and `vs_imu_vertical` (the errors with that share removed: what
+    the method and the data determine).
 heldout: on the held-out recordings, before (dq = 0) and after (dq_hat) correction:
     foot_height_rms_mm: the flat-ground row p_Lz - p_Rz in the IMU-levelled frame
         (the paper's held-out validation; computed from the logged, noisy sensors);
@@ -27,6 +32,7 @@ from legcal_bench.evaluation.metrics import rms
 from legcal_bench.geometry.poses import pos_quat_to_se3
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.sim.sensors import ImuErrors
 
 
 def _errors_at(kin: LegKinematics, q: np.ndarray, up_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -62,6 +68,28 @@ def _truths(paths, names: list[str]) -> dict:
     return truths
 
 
+def _imu_share(kin: LegKinematics, result: CalibrationResult, truths: dict) -> tuple[np.ndarray, np.ndarray] | None:
+    """(the IMU's true vertical error as a rotation about the pelvis x, y axes, in rad;
+    the offsets it moves the estimate by), from the truth's realized IMU errors and the
+    result's `imu_tilt_response`; None if either is missing."""
+    V = result.diagnostics.get("imu_tilt_response")
+    errors = [t.meta.get("imu_errors") for t in truths.values()]
+    if V is None or any(e is None for e in errors):
+        return None
+    V = np.asarray(V, dtype=float)
+    if V.shape != (12, 2) or not np.isfinite(V).all():
+        raise CalibrationError("diagnostics.imu_tilt_response must be 12 x 2 finite numbers (offsets per rad of IMU "
+                               "tilt about the pelvis x and y axes)")
+    imu = ImuErrors.from_dict(errors[0])
+    stance_up = [pos_quat_to_se3(x).rotation.T @ [0.0, 0.0, 1.0] for t in truths.values()
+                 for x in t.pelvis_pose_world[::10]]
+    u_B = np.mean(stance_up, axis=0)
+    u_B /= np.linalg.norm(u_B)
+    v_B = kin.R_BI @ imu.vertical(kin.R_BI.T @ u_B)
+    tilt = np.cross(u_B, v_B)[:2]
+    return tilt, V @ tilt
+
+
 def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: bool = False) -> dict:
     kin = LegKinematics(legmap)
     names = legmap.joint_names
@@ -87,6 +115,15 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
             "pitch_sum_error_deg": {k: float(np.rad2deg(ps_hat[k] - ps_true[k])) for k in ps_hat},
             "injected_deg": {n: float(np.rad2deg(v)) for n, v in zip(names, injected)},
         }
+        share = _imu_share(kin, result, truths)
+        if share is not None:
+            tilt, moved = share
+            rel = e - moved
+            out["recovery"]["imu_tilt_mrad"] = (tilt * 1e3).tolist()
+            out["recovery"]["imu_share_rms_deg"] = float(np.rad2deg(rms(moved)))
+            out["recovery"]["vs_imu_vertical"] = {
+                "rms_error_deg": float(np.rad2deg(rms(rel))), "max_error_deg": float(np.rad2deg(np.abs(rel).max())),
+                "pitch_sum_error_deg": {k: float(np.rad2deg(v)) for k, v in pitch_sums(rel, signs).items()}}
     R_BI = kin.R_BI
     held = [p for p in paths if load_recording(p, names).kind == "heldout"]
     if held:
