@@ -81,6 +81,8 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
 
         sim_sensors(a.sensors)  # an unknown preset fails here, naming the presets
         out["sensors"] = a.sensors
+    if a.period_scale is not None:
+        out["period_scale"] = a.period_scale
     if a.native is not None:
         from legcal_bench.robots import load_robot
         from legcal_bench.sim.offsets import resolve_offsets
@@ -98,6 +100,8 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--stances", nargs="+", default=None,
                    help="stances to record, as in collect (default: I II III IV); held-out sessions follow them")
     p.add_argument("--sensors", default=None, help="sensor preset, as in collect (default: the suite's, realistic)")
+    p.add_argument("--period-scale", type=float, default=None,
+                   help="slower posture motion, as in collect (default 1; stance seconds are not scaled with it)")
     p.add_argument("--native", default=None,
                    help="the robots' own (factory) offsets under the injection: random:<deg> (default random:1.2, "
                         "uniform per joint), paper-base (the paper's real robots' base offsets), none")

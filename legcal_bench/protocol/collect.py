@@ -50,6 +50,9 @@ class CollectConfig:
     jitter_rad: float = 0.05
     heldout_jitter_m: float = 0.04
     heldout_jitter_rad: float = 0.1
+    # The posture motion's periods x this: 2 = twice as slow, a quarter of the IMU's
+    # motion acceleration (give twice the --stance-seconds to cover the same cycles).
+    period_scale: float = 1.0
 
 
 @dataclass
@@ -105,7 +108,7 @@ class Segment(NamedTuple):
 
 
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,
-                   jitter_rad: float, progress=None) -> Segment:
+                   jitter_rad: float, progress=None, period_scale: float = 1.0) -> Segment:
     """Run one segment of `stance` (fitted to the robot, `fit_stance`). The posture
     motion's IK is solved once, in one batch (`feasible_trajectory`), and handed to the
     simulator (`DoubleSupportSim.run`)."""
@@ -129,7 +132,7 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
         return Segment(*sim.run(np.clip(np.repeat(sim.posture[None], n, axis=0), low, high), rng,
                                 progress=progress), 1.0, 1.0)
     motion = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz, np.random.default_rng(seed + 7919),
-                                 return_q=True)
+                                 return_q=True, period_scale=period_scale)
     clipped = np.clip(motion.postures, low, high)
     q_cmd = motion.q.copy()
     q_cmd[(clipped != motion.postures).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
@@ -166,6 +169,9 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
     out_dir = Path(out_dir)
     if cfg.mode not in MODES:
         raise ConfigError(f"mode {cfg.mode!r}: use one of {MODES}")
+    if not 0.1 <= cfg.period_scale <= 10:
+        raise ConfigError(f"period_scale {cfg.period_scale!r}: use a factor in [0.1, 10] on the posture motion's "
+                          "periods (2: twice as slow)")
     legmap = load_robot(cfg.robot, cfg.mjcf)
     sim_legmap = legmap if cfg.sim_robot is None else load_robot(cfg.sim_robot)
     gains = servo_gains(sim_legmap) if cfg.mode != "kinematic" else None
@@ -187,7 +193,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         bar = tqdm(total=total, desc=f"collect {legmap.name} ({cfg.mode})", unit="frame", disable=not progress)
         for (name, kind, stance, duration, jm, jr), seed in zip(plan, seeds):
             bar.set_postfix_str(name)
-            obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar)
+            obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar,
+                                                                 cfg.period_scale)
             hold = check_hold(sim, name, stance, tr, gains.note if gains else "")
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,

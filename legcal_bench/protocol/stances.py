@@ -144,14 +144,15 @@ def place(stance: Stance, dims: RobotDims, rng: np.random.Generator | None = Non
 
 
 def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, rate_hz: float,
-                       rng: np.random.Generator, ramp_s: float = 3.0) -> np.ndarray:
+                       rng: np.random.Generator, ramp_s: float = 3.0, period_scale: float = 1.0) -> np.ndarray:
     """(N, 6) postures at `rate_hz`: the nominal posture plus slow sinusoids with random
-    phases, faded in (smoothstep) over `ramp_s` so motion starts from rest."""
+    phases (periods `PERIODS` x `period_scale`: twice as slow, a quarter of the
+    accelerations), faded in (smoothstep) over `ramp_s` so motion starts from rest."""
     n = int(round(duration * rate_hz))
     t = np.arange(n) / rate_hz
     amp = np.array(placement.stance.amplitude) * [dims.leg_length, dims.leg_length, dims.leg_length, 1, 1, 1]
     phase = rng.uniform(0, 2 * np.pi, 6)
-    wave = amp * np.sin(2 * np.pi * t[:, None] / np.array(PERIODS) + phase)
+    wave = amp * np.sin(2 * np.pi * t[:, None] / (period_scale * np.array(PERIODS)) + phase)
     fade = np.clip(t / ramp_s, 0, 1)[:, None] if ramp_s > 0 else np.ones((n, 1))
     return placement.nominal + fade * fade * (3 - 2 * fade) * wave
 
@@ -178,7 +179,8 @@ class Motion(NamedTuple):
 
 
 def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: float, rate_hz: float,
-                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10, return_q: bool = False):
+                        rng: np.random.Generator, shrink: float = 0.8, tries: int = 10, return_q: bool = False,
+                        period_scale: float = 1.0):
     """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
     is reachable within the joint limits of `kin` and statically balanced (the CoM at
     least a quarter sole width inside the support polygon, checked every fifth frame),
@@ -186,7 +188,7 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
     with `return_q` a `Motion`: also their joint angles (N, 12) on `kin` (the whole
     trajectory's IK is solved in one batch, `posture_ik`) and the amplitude scale used."""
     margin = 0.25 * kin.dims.sole_width
-    base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng)
+    base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng, period_scale=period_scale)
     for k in range(tries):
         traj = placement.nominal + (shrink ** k) * (base - placement.nominal)
         try:
