@@ -19,7 +19,7 @@ from legcal_bench.evaluation.metrics import rms
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.protocol.collect import collect
-from legcal_bench.provenance import code_version
+from legcal_bench.provenance import RESULTS_VERSION, code_version
 from legcal_bench.sim.offsets import paper_injection
 
 HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
@@ -33,15 +33,27 @@ def single_thread() -> None:
         os.environ.setdefault(k, "1")
 
 
+def is_current(out: Path, ds: Dataset) -> bool:
+    """True if `out` holds a whole session set collected with `ds`'s config under the
+    current `RESULTS_VERSION` (a set from other offsets, sensors or code is stale)."""
+    try:
+        man = json.loads((out / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return False
+    want = json.loads(json.dumps(asdict(ds.config())))
+    return isinstance(man, dict) and man.get("config") == want and man.get("results_version") == RESULTS_VERSION
+
+
 def collect_dataset(ds: Dataset, data_dir: str) -> str:
-    """Collect one session set (kept if its manifest exists); returns its directory. A
-    set that cannot be collected (the robot does not hold a posture, a stance does not
-    fit) leaves `<name>.failed.json` with the reason instead, which the set's cells
-    record as their error; it is tried again on the next run."""
+    """Collect one session set (kept if its manifest records the same config and
+    results version; a stale one is replaced); returns its directory. A set that cannot
+    be collected (the robot does not hold a posture, a stance does not fit) leaves
+    `<name>.failed.json` with the reason instead, which the set's cells record as their
+    error; it is tried again on the next run."""
     single_thread()
     out = Path(data_dir) / ds.name
     failed = failure_path(data_dir, ds)
-    if not (out / MANIFEST).is_file():
+    if not is_current(out, ds):
         try:
             collect(ds.config(), out, progress=False)
         except LegcalError as e:

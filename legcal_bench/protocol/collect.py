@@ -22,6 +22,7 @@ from legcal_bench.errors import ConfigError, HoldError, IKError
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import ALL_STANCES, STANCES, feasible_trajectory, fit_stance, place, posture_bounds
+from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.hold import HoldReport
@@ -224,6 +225,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         bar.close()
         write_manifest(folder, {"robot": legmap.name, "mode": cfg.mode, "seed": cfg.seed,
                                 "sensor_model": sim.sensor.model.to_dict(), "files": files, "config": asdict(cfg),
+                                "results_version": RESULTS_VERSION,
                                 "servo_gains": summary.servo_gains,
                                 "stances": {g.name: {"stance": g.stance, "stance_scale": g.stance_scale,
                                                      "motion_scale": g.motion_scale, "hold": g.hold}

@@ -3,6 +3,7 @@
 import json
 import sys
 import textwrap
+from pathlib import Path
 from concurrent.futures import ThreadPoolExecutor
 from importlib import invalidate_caches
 
@@ -127,3 +128,25 @@ def test_a_suite_robot_without_its_model_is_skipped_with_its_path(tmp_path):
     with pytest.warns(planning.MissingRobotWarning, match=r"ghost.*nowhere/robot\.xml"):
         cells = planning.plan("sweep", robots=["a3", str(lm)], modes=["weld"], seeds=1, calibrators=["zero"])
     assert {c.robot for c in cells} == {"a3"}
+
+
+def test_a_stale_cached_session_set_is_collected_again(tmp_path):
+    """A cached set is reused only if its manifest records the dataset's config and the
+    results version: one collected with other offsets (e.g. before the native offsets
+    changed) is replaced, not silently scored."""
+    import json
+
+    from legcal_bench.benchmark.plan import Dataset
+    from legcal_bench.benchmark.tasks import collect_dataset, is_current
+
+    ds = Dataset("a3", "kinematic", 0, 1.0, "native", (("heldout", 0), ("stance_s", 1.0), ("standing_s", 0.0),
+                                                         ("stances", ("I",))))
+    out = Path(collect_dataset(ds, str(tmp_path)))
+    assert is_current(out, ds)
+    man = json.loads((out / "session.json").read_text())
+    man["config"]["offsets"] = [0.0] * 12
+    (out / "session.json").write_text(json.dumps(man))
+    assert not is_current(out, ds)
+    collect_dataset(ds, str(tmp_path))
+    assert is_current(out, ds)
+    assert json.loads((out / "session.json").read_text())["config"]["offsets"] == list(ds.config().offsets)
