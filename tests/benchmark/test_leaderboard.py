@@ -19,3 +19,14 @@ def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
         section = text[text.index(f"## {robot} — weld — suite `standard`"):]
         for row in ("zero-default", "interfoot-operating", "interfoot-matched", "yamane-default"):
             assert f"| {row} |" in section.split("## ")[1]
+
+
+def test_beats_zero_counts_seeds_on_the_same_sessions():
+    from legcal_bench.benchmark.leaderboard import _beats_baseline
+
+    def cell(seed, h):
+        return {"cell": {"seed": seed}, "native": {"score": {"heldout": {"foot_height_rms_true_mm": {"after": h}}}}}
+
+    zero = [cell(0, 1.0), cell(1, 1.0), cell(2, 1.0)]
+    assert _beats_baseline([cell(0, 0.5), cell(1, 2.0), cell(2, 0.9), cell(3, 0.1)], zero) == "2/3"
+    assert _beats_baseline([cell(0, 0.5)], []) == "–"
