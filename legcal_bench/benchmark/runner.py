@@ -53,15 +53,16 @@ def watch_parent(parent_pid: int, period_s: float = 0.5) -> None:
 
 
 def is_done(cell: Cell, results_dir: Path) -> bool:
-    """True if the cell's file is a whole result (or a recorded failure) made under the
-    cell's current key."""
+    """True if the cell's file is a whole result made under the cell's current key. A
+    recorded failure is tried again on every run: its cause may be gone (a stale or
+    half-written session set, a fixed bug); one that persists is recorded again."""
     try:
         c = json.loads(cell.path(results_dir).read_text())
     except (OSError, ValueError):
         return False
     if not isinstance(c, dict) or c.get("key") != cell.key():
         return False
-    return "error" in c or all(k in c for k in RESULT_KEYS)
+    return "error" not in c and all(k in c for k in RESULT_KEYS)
 
 
 def run(cells: list[Cell], data_dir: str | Path, results_dir: str | Path, executor: Executor | None = None,

@@ -96,7 +96,8 @@ def test_resume_recomputes_partial_empty_and_stale_cells(tmp_path):
     whole = json.loads(path.read_text())
     assert is_done(cell, results)
     for broken in ("{}", "", '{"cell": {}', json.dumps({**whole, "key": "0" * 16}),
-                   json.dumps({k: v for k, v in whole.items() if k != "injected"})):
+                   json.dumps({k: v for k, v in whole.items() if k != "injected"}),
+                   json.dumps({"key": whole["key"], "cell": whole["cell"], "error": "a stale session set"})):
         path.write_text(broken)
         assert not is_done(cell, results), broken[:40]
     with ThreadPoolExecutor(1) as ex:
