@@ -13,13 +13,13 @@ import numpy as np
 
 from legcal_bench.benchmark.plan import Cell, Dataset
 from legcal_bench.calibrators.base import get_calibrator
-from legcal_bench.data.recording import MANIFEST, list_segments, load_session, load_truth
+from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.errors import LegcalError
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.atomic import atomic_write_json
-from legcal_bench.protocol.collect import collect
-from legcal_bench.provenance import RESULTS_VERSION, code_version
+from legcal_bench.protocol.collect import collect, is_collected
+from legcal_bench.provenance import code_version
 from legcal_bench.sim.offsets import paper_injection
 
 HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
@@ -36,12 +36,7 @@ def single_thread() -> None:
 def is_current(out: Path, ds: Dataset) -> bool:
     """True if `out` holds a whole session set collected with `ds`'s config under the
     current `RESULTS_VERSION` (a set from other offsets, sensors or code is stale)."""
-    try:
-        man = json.loads((out / MANIFEST).read_text())
-    except (OSError, ValueError):
-        return False
-    want = json.loads(json.dumps(asdict(ds.config())))
-    return isinstance(man, dict) and man.get("config") == want and man.get("results_version") == RESULTS_VERSION
+    return is_collected(out, ds.config())
 
 
 def collect_dataset(ds: Dataset, data_dir: str) -> str:

@@ -9,6 +9,8 @@ env episode reset with the same seed and stepped with the same postures.
 
 from __future__ import annotations
 
+import json
+
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -17,7 +19,7 @@ from typing import NamedTuple
 import numpy as np
 from tqdm import tqdm
 
-from legcal_bench.data.recording import Recording, Truth, is_session_dir, truth_path, write_manifest
+from legcal_bench.data.recording import MANIFEST, Recording, Truth, is_session_dir, truth_path, write_manifest
 from legcal_bench.errors import ConfigError, HoldError, IKError
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.protocol.servos import servo_gains
@@ -106,6 +108,17 @@ class Segment(NamedTuple):
     truth: dict  # stacked ground truth
     stance_scale: float  # the stance's placement and depth, shrunk to fit the robot (1: as designed)
     motion_scale: float  # the posture motion's amplitude, shrunk to stay reachable and balanced
+
+
+def is_collected(out_dir: str | Path, cfg: CollectConfig) -> bool:
+    """True if `out_dir` holds a whole session set collected with `cfg` under the current
+    `RESULTS_VERSION`: a cached set from other offsets, sensors or code is stale."""
+    try:
+        man = json.loads((Path(out_dir) / MANIFEST).read_text())
+    except (OSError, ValueError):
+        return False
+    want = json.loads(json.dumps(asdict(cfg)))
+    return isinstance(man, dict) and man.get("config") == want and man.get("results_version") == RESULTS_VERSION
 
 
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,

@@ -17,11 +17,11 @@ from tqdm import tqdm
 from legcal_bench import paper
 from legcal_bench.benchmark.suites import G1_EXAMPLE
 from legcal_bench.calibrators.base import CalibrationResult, get_calibrator
-from legcal_bench.data.recording import MANIFEST, load_session
+from legcal_bench.data.recording import load_session
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.files.plots import pyplot, save_figure
 from legcal_bench.files.reports import write_report
-from legcal_bench.protocol.collect import CollectConfig, collect
+from legcal_bench.protocol.collect import CollectConfig, collect, is_collected
 from legcal_bench.provenance import code_version, describe
 from legcal_bench.robots import available, load_robot, robot_label
 from legcal_bench.robots.design import PITCH_ROLES
@@ -44,9 +44,9 @@ class Reproduction:
         name = f"{robot_label(robot)}_{mode}_{sensors}_{'-'.join(stances)}" + "".join(
             f"_{k}{v:g}" for k, v in sorted(config.items()))
         d = self.out / "data" / name
-        if not (d / MANIFEST).is_file():
-            collect(CollectConfig(robot=robot, mode=mode, sensors=sensors, stances=tuple(stances), **config), d,
-                    progress=self.progress)
+        cfg = CollectConfig(robot=robot, mode=mode, sensors=sensors, stances=tuple(stances), **config)
+        if not is_collected(d, cfg):
+            collect(cfg, d, progress=self.progress)
         lm = load_robot(robot)
         return lm, load_session(d, lm.joint_names)
 
