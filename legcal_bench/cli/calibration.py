@@ -1,4 +1,4 @@
-"""`legcal-bench calibrate`, `check`, `score` and `export`."""
+"""`legcal-bench calibrate`, `check`, `score`, `design` and `export`."""
 
 from __future__ import annotations
 
@@ -150,6 +150,38 @@ def cmd_check(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_design(a: argparse.Namespace) -> int:
+    """Predicted information of the default stances against a greedy E-optimal choice
+    of sampled stances (issue #12, first part: predicted only, not yet collected)."""
+    from legcal_bench.estimation.design import design
+    from legcal_bench.protocol.stances import STANCES
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    if a.count < 1 or a.candidates < a.count:
+        from legcal_bench.errors import ConfigError
+
+        raise ConfigError(f"--count {a.count} / --candidates {a.candidates}: need 1 <= count <= candidates")
+    kin = LegKinematics(load_robot(a.robot, a.mjcf))
+    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, seed=a.seed, sensors=a.sensors)
+    if a.json:
+        from dataclasses import asdict
+
+        print(json.dumps({**d, "designed_stances": [asdict(s) for s in d["designed_stances"]]}, indent=2))
+        return 0
+    print(f"{kin.legmap.name}: {d['frames']} frames in all; {d['candidates_fitting']} of {a.candidates} sampled "
+          f"stances fit the robot (predicted from the kinematics, {a.sensors} sensor noise)")
+    for name in ("default", "designed"):
+        s = d[name]
+        print(f"  {name:8s} smallest eigenvalues {', '.join(f'{v:.3g}' for v in s['eigenvalues'])}; "
+              f"kappa {s['kappa']:.3g}; worst offset std {max(s['std_deg'].values()):.4f} deg; pitch-sum std "
+              + ", ".join(f"{k} {v:.4f}" for k, v in s["pitch_sum_std_deg"].items()) + " deg")
+    for st, scale in zip(d["designed_stances"], d["motion_scales"]):
+        print(f"  designed: left_x {st.left_x:+.3f}, right_x {st.right_x:+.3f}, extra_width {st.extra_width:+.3f} "
+              f"(leg lengths), toe_out {st.toe_out:+.3f} rad, depth {st.depth:.3f}, motion scale {scale:.2f}")
+    return 0
+
+
 def cmd_export(a: argparse.Namespace) -> int:
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.robots import load_robot
@@ -203,6 +235,16 @@ def add_commands(sub) -> None:
                                                    "(the calibrators do this with their own)")
     ck.add_argument("--json", action="store_true")
     ck.set_defaults(func=cmd_check)
+
+    de = sub.add_parser("design", help="stance design, first part: the default stances' predicted information "
+                                       "against a greedy E-optimal choice of sampled stances (same frame count)")
+    robot_args(de)
+    de.add_argument("--count", type=int, default=4, help="stances to choose (default 4)")
+    de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
+    de.add_argument("--seed", type=int, default=0)
+    de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
+    de.add_argument("--json", action="store_true")
+    de.set_defaults(func=cmd_design)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
                                        "optionally a copy of its MJCF with the correction folded in")

@@ -1,0 +1,124 @@
+"""Stance design (issue #12, first part): the information a stance protocol gives about
+the offsets, predicted from the kinematics, and a greedy E-optimal choice of stances.
+
+A stance (`legcal_bench.protocol.stances.Stance`: foot placement, squat depth, posture
+motion amplitudes) is fitted to the robot and its posture motion made reachable and
+balanced exactly as `collect` does (`fit_stance`, `feasible_trajectory`). Its
+information matrix is the noise-whitened data rows of the inter-foot calibration at
+the true offsets, on a level floor with the IMU's true vertical:
+
+    H_s = sum_k G_k^T W_f G_k - N gbar^T W_f gbar + sum_k F_k^T W_g F_k
+
+(the inter-foot rows about the stance's mean transform, which the calibration
+estimates, hence the Schur complement; the flat-ground rows as they are), whitened by
+the declared sensor model (`noise_sigmas`). A protocol's information is the sum over
+its stances; its predicted standard deviations are sqrt(diag(H^-1)). Predicted, not
+measured: the hold check in weld and contact mode and the recovery over seeds come
+with the collected protocol (the rest of issue #12).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from legcal_bench.errors import IKError
+from legcal_bench.estimation.levelling import levelling_rotations
+from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.estimation.residuals import flat_residuals
+from legcal_bench.geometry.poses import posture_poses
+from legcal_bench.protocol.stances import Stance, feasible_trajectory, fit_stance, place
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
+from legcal_bench.sim.sensors import sensor_model
+
+# Ranges of the sampled candidates (leg lengths, rad; amplitudes as factors on stance I's).
+CANDIDATE_RANGES = dict(x=(-0.15, 0.15), extra_width=(-0.02, 0.12), toe_out=(-0.1, 0.25), depth=(0.04, 0.16),
+                        amplitude=(0.3, 1.6))
+EVAL_STEP = 4  # information from every 4th frame, scaled back up (the motion is smooth)
+
+
+@dataclass
+class StanceInfo:
+    stance: Stance  # as fitted to the robot
+    H: np.ndarray  # (12, 12) whitened information
+    motion_scale: float
+
+
+def stance_information(kin: LegKinematics, stance: Stance, frames: int, rate_hz: float = 50.0, seed: int = 0,
+                       sensors: str = "realistic") -> StanceInfo:
+    """The whitened information of `frames` frames of `stance` on this robot."""
+    sig = noise_sigmas(sensor_model(sensors), kin.dims.leg_length)
+    if sig is None:
+        raise ValueError("stance design needs a sensor model with noise (its information is relative to it)")
+    fitted = fit_stance(stance, kin).stance
+    placement = place(fitted, kin.dims)
+    motion = feasible_trajectory(kin, placement, frames / rate_hz, rate_hz, np.random.default_rng(seed),
+                                 return_q=True)
+    Q = motion.q[::EVAL_STEP]
+    fk = frame_kinematics(kin, Q)
+    up = np.einsum("nji,j->ni", posture_poses(motion.postures[::EVAL_STEP])[:, :3, :3], [0.0, 0.0, 1.0])
+    _, F = flat_residuals(fk, up, levelling_rotations(up))
+    wf = np.array([1 / sig["feet_translation"]] * 3 + [1 / sig["feet_rotation"]] * 3)
+    wg = np.array([1 / sig["flat_height"]] + [1 / sig["flat_normal"]] * 4)
+    G, F = wf[None, :, None] * fk.G, wg[None, :, None] * F
+    g = G.sum(axis=0)
+    H = np.einsum("nij,nik->jk", G, G) - g.T @ g / len(G) + np.einsum("nij,nik->jk", F, F)
+    return StanceInfo(fitted, H * EVAL_STEP, motion.scale)
+
+
+def sample_stances(n: int, rng: np.random.Generator) -> list[Stance]:
+    r = CANDIDATE_RANGES
+    base = np.array(Stance("I", "").amplitude)
+    return [Stance(f"D{i}", "designed", left_x=rng.uniform(*r["x"]), right_x=rng.uniform(*r["x"]),
+                   extra_width=rng.uniform(*r["extra_width"]), toe_out=rng.uniform(*r["toe_out"]),
+                   depth=rng.uniform(*r["depth"]),
+                   amplitude=tuple(float(a) for a in base * rng.uniform(*r["amplitude"], 6)))
+            for i in range(n)]
+
+
+def greedy_design(candidates: list[StanceInfo], k: int) -> list[int]:
+    """Indices of `k` candidates chosen one at a time, each maximizing the smallest
+    eigenvalue of the summed information (E-optimal)."""
+    chosen: list[int] = []
+    H = np.zeros((12, 12))
+    for _ in range(k):
+        best = max((j for j in range(len(candidates)) if j not in chosen),
+                   key=lambda j: np.linalg.eigvalsh(H + candidates[j].H)[0])
+        chosen.append(best)
+        H = H + candidates[best].H
+    return chosen
+
+
+def summary(kin: LegKinematics, H: np.ndarray) -> dict:
+    """Smallest eigenvalues, condition number and predicted standard deviations (deg)
+    per offset and pitch sum."""
+    w = np.linalg.eigvalsh(H)
+    cov = np.linalg.inv(H)
+    signs = kin.pitch_signs()
+    ps = {}
+    for key in ("left", "right", "right_minus_left"):
+        a = np.array([pitch_sums(e, signs)[key] for e in np.eye(12)])
+        ps[key] = float(np.degrees(np.sqrt(a @ cov @ a)))
+    return {"eigenvalues": w[:3].tolist(), "kappa": float(w[-1] / w[0]),
+            "std_deg": dict(zip(kin.legmap.joint_names, np.degrees(np.sqrt(np.diag(cov))).tolist())),
+            "pitch_sum_std_deg": ps}
+
+
+def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: int = 60, frames: int = 2400,
+           seed: int = 0, sensors: str = "realistic") -> dict:
+    """The default protocol against `k` stances chosen from `candidates` sampled ones,
+    at the same total frame count; candidates that do not fit the robot are skipped."""
+    rng = np.random.default_rng(seed)
+    default_info = [stance_information(kin, s, frames // len(default), seed=seed, sensors=sensors) for s in default]
+    pool = []
+    for st in sample_stances(candidates, rng):
+        try:
+            pool.append(stance_information(kin, st, frames // k, seed=seed, sensors=sensors))
+        except IKError:
+            continue
+    chosen = [pool[j] for j in greedy_design(pool, k)]
+    return {"default": summary(kin, sum(s.H for s in default_info)),
+            "designed": summary(kin, sum(s.H for s in chosen)),
+            "designed_stances": [c.stance for c in chosen], "motion_scales": [c.motion_scale for c in chosen],
+            "candidates_fitting": len(pool), "frames": frames}

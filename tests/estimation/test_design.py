@@ -1,0 +1,44 @@
+"""Stance design, first part (issue #12): the predicted information of a protocol and a
+greedy E-optimal choice of stances."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from legcal_bench.cli import main
+from legcal_bench.estimation.design import StanceInfo, greedy_design, stance_information
+from legcal_bench.protocol.stances import STANCES
+from legcal_bench.robots import load_robot
+from legcal_bench.robots.kinematics import LegKinematics
+
+
+def test_information_grows_with_frames_and_a_single_stance_leaves_weak_directions():
+    kin = LegKinematics(load_robot("a2"))
+    one = stance_information(kin, STANCES["I"], 600)
+    two = stance_information(kin, STANCES["I"], 1200)
+    assert np.allclose(one.H, one.H.T) and np.linalg.eigvalsh(one.H)[0] > 0
+    # Twice the frames of the same periodic motion: about twice the information.
+    assert 1.5 < np.trace(two.H) / np.trace(one.H) < 2.5
+    four = sum(stance_information(kin, s, 600).H for s in STANCES.values())
+    assert np.linalg.eigvalsh(four)[0] > 3 * np.linalg.eigvalsh(one.H)[0]
+
+
+def test_greedy_design_picks_what_fills_the_weakest_direction():
+    e = np.eye(12)
+    strong = StanceInfo(STANCES["I"], 100 * np.diag([1.0] * 11 + [0.0]) + 1e-6 * e, 1.0)
+    weak_fix = StanceInfo(STANCES["II"], np.diag([0.0] * 11 + [5.0]) + 1e-6 * e, 1.0)
+    more_strong = StanceInfo(STANCES["III"], 200 * np.diag([1.0] * 11 + [0.0]) + 1e-6 * e, 1.0)
+    chosen = greedy_design([strong, more_strong, weak_fix], 2)
+    # The two with the most information in all (0 and 1) leave the last direction empty;
+    # E-optimal choice takes the one that fills it.
+    assert 2 in chosen and len(set(chosen)) == 2
+
+
+def test_design_command_reports_default_and_designed(capsys):
+    assert main(["design", "--robot", "a3", "--candidates", "12", "--count", "2", "--json"]) == 0
+    import json
+
+    d = json.loads(capsys.readouterr().out)
+    assert set(d) >= {"default", "designed", "designed_stances", "frames"} and len(d["designed_stances"]) == 2
+    assert d["designed"]["eigenvalues"][0] > 0 and len(d["designed"]["std_deg"]) == 12
+    assert main(["design", "--robot", "a3", "--count", "5", "--candidates", "3"]) == 2
