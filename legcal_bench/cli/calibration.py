@@ -163,7 +163,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 
         raise ConfigError(f"--count {a.count} / --candidates {a.candidates}: need 1 <= count <= candidates")
     kin = LegKinematics(load_robot(a.robot, a.mjcf))
-    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, seed=a.seed, sensors=a.sensors)
+    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, seed=a.seed, sensors=a.sensors,
+               ranges=a.ranges)
     if a.json:
         from dataclasses import asdict
 
@@ -242,6 +243,8 @@ def add_commands(sub) -> None:
     de.add_argument("--count", type=int, default=4, help="stances to choose (default 4)")
     de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
     de.add_argument("--seed", type=int, default=0)
+    de.add_argument("--ranges", default="default", choices=["default", "wide"],
+                    help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
     de.add_argument("--json", action="store_true")
     de.set_defaults(func=cmd_design)

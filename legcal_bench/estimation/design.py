@@ -32,9 +32,16 @@ from legcal_bench.protocol.stances import Stance, feasible_trajectory, fit_stanc
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
 from legcal_bench.sim.sensors import sensor_model
 
-# Ranges of the sampled candidates (leg lengths, rad; amplitudes as factors on stance I's).
-CANDIDATE_RANGES = dict(x=(-0.15, 0.15), extra_width=(-0.02, 0.12), toe_out=(-0.1, 0.25), depth=(0.04, 0.16),
-                        amplitude=(0.3, 1.6))
+# Ranges of the sampled candidates (leg lengths, rad; amplitudes as factors on stance I's):
+# "default" stays near the paper's stances; "wide" allows larger placements and up to
+# three times stance I's motion (whether the robot holds those is for the collected
+# protocol's hold check to say).
+CANDIDATE_RANGES = {
+    "default": dict(x=(-0.15, 0.15), extra_width=(-0.02, 0.12), toe_out=(-0.1, 0.25), depth=(0.04, 0.16),
+                    amplitude=(0.3, 1.6)),
+    "wide": dict(x=(-0.2, 0.2), extra_width=(-0.03, 0.16), toe_out=(-0.2, 0.35), depth=(0.03, 0.22),
+                 amplitude=(0.5, 3.0)),
+}
 EVAL_STEP = 4  # information from every 4th frame, scaled back up (the motion is smooth)
 
 
@@ -67,8 +74,8 @@ def stance_information(kin: LegKinematics, stance: Stance, frames: int, rate_hz:
     return StanceInfo(fitted, H * EVAL_STEP, motion.scale)
 
 
-def sample_stances(n: int, rng: np.random.Generator) -> list[Stance]:
-    r = CANDIDATE_RANGES
+def sample_stances(n: int, rng: np.random.Generator, ranges: str = "default") -> list[Stance]:
+    r = CANDIDATE_RANGES[ranges]
     base = np.array(Stance("I", "").amplitude)
     return [Stance(f"D{i}", "designed", left_x=rng.uniform(*r["x"]), right_x=rng.uniform(*r["x"]),
                    extra_width=rng.uniform(*r["extra_width"]), toe_out=rng.uniform(*r["toe_out"]),
@@ -106,13 +113,13 @@ def summary(kin: LegKinematics, H: np.ndarray) -> dict:
 
 
 def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: int = 60, frames: int = 2400,
-           seed: int = 0, sensors: str = "realistic") -> dict:
+           seed: int = 0, sensors: str = "realistic", ranges: str = "default") -> dict:
     """The default protocol against `k` stances chosen from `candidates` sampled ones,
     at the same total frame count; candidates that do not fit the robot are skipped."""
     rng = np.random.default_rng(seed)
     default_info = [stance_information(kin, s, frames // len(default), seed=seed, sensors=sensors) for s in default]
     pool = []
-    for st in sample_stances(candidates, rng):
+    for st in sample_stances(candidates, rng, ranges):
         try:
             pool.append(stance_information(kin, st, frames // k, seed=seed, sensors=sensors))
         except IKError:
