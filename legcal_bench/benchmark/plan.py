@@ -122,6 +122,8 @@ def _config_dict(ds: Dataset) -> dict:
     d["robot"] = robot_label(ds.robot)
     if d.get("mjcf"):
         d["mjcf"] = Path(d["mjcf"]).name
+    if d.get("protocol"):  # the protocol's content, not where it lies
+        d["protocol"] = stable_hash(Path(d["protocol"]).read_text())
     return d
 
 

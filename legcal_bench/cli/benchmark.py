@@ -83,6 +83,11 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
         out["sensors"] = a.sensors
     if a.period_scale is not None:
         out["period_scale"] = a.period_scale
+    if a.protocol is not None:
+        from legcal_bench.protocol.stances import load_protocol
+
+        load_protocol(a.protocol)  # a bad file fails here, naming the field
+        out["protocol"] = str(Path(a.protocol).resolve())
     if a.native is not None:
         from legcal_bench.robots import load_robot
         from legcal_bench.sim.offsets import resolve_offsets
@@ -102,6 +107,8 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--sensors", default=None, help="sensor preset, as in collect (default: the suite's, realistic)")
     p.add_argument("--period-scale", type=float, default=None,
                    help="slower posture motion, as in collect (default 1; stance seconds are not scaled with it)")
+    p.add_argument("--protocol", default=None, help="a protocol file (legcal-bench design --out): its stances "
+                                                    "instead of the suite's")
     p.add_argument("--native", default=None,
                    help="the robots' own (factory) offsets under the injection: random:<deg> (default random:1.2, "
                         "uniform per joint), paper-base (the paper's real robots' base offsets), none")

@@ -177,6 +177,15 @@ def cmd_design(a: argparse.Namespace) -> int:
         print(f"  {name:8s} smallest eigenvalues {', '.join(f'{v:.3g}' for v in s['eigenvalues'])}; "
               f"kappa {s['kappa']:.3g}; worst offset std {max(s['std_deg'].values()):.4f} deg; pitch-sum std "
               + ", ".join(f"{k} {v:.4f}" for k, v in s["pitch_sum_std_deg"].items()) + " deg")
+    if a.out:
+        from legcal_bench.protocol.stances import write_protocol
+
+        path = write_protocol(a.out, d["designed_stances"], {
+            "robot": kin.legmap.name, "frames": d["frames"], "stance_s": d["frames"] / len(d["designed_stances"]) / 50,
+            "made_by": f"legcal-bench design --robot {a.robot} --count {a.count} --candidates {a.candidates} "
+                       f"--ranges {a.ranges} --seed {a.seed}"})
+        print(f"wrote {path}: collect it with legcal-bench collect --protocol {path} --stance-seconds "
+              f"{d['frames'] / len(d['designed_stances']) / 50:g}")
     for st, scale in zip(d["designed_stances"], d["motion_scales"]):
         print(f"  designed: left_x {st.left_x:+.3f}, right_x {st.right_x:+.3f}, extra_width {st.extra_width:+.3f} "
               f"(leg lengths), toe_out {st.toe_out:+.3f} rad, depth {st.depth:.3f}, motion scale {scale:.2f}")
@@ -246,6 +255,8 @@ def add_commands(sub) -> None:
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
+    de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "
+                                                "collect/bench --protocol")
     de.add_argument("--json", action="store_true")
     de.set_defaults(func=cmd_design)
 

@@ -18,7 +18,8 @@ def cmd_collect(a: argparse.Namespace) -> int:
         robot=a.robot, mjcf=a.mjcf, sim_robot=a.sim_model, mode=a.mode, stances=tuple(a.stances),
         offsets=a.offsets, sensors=a.sensors, seed=a.seed, heldout=a.heldout, rate_hz=a.rate,
         stance_s=a.stance_seconds, heldout_s=a.heldout_seconds, standing_s=a.standing_seconds,
-        knee_straight_error_rad=float(np.deg2rad(a.knee_error_deg)), period_scale=a.period_scale)
+        knee_straight_error_rad=float(np.deg2rad(a.knee_error_deg)), period_scale=a.period_scale,
+        protocol=a.protocol)
     summary = collect(cfg, a.out, progress=not a.quiet)
     print(json.dumps(asdict(summary), indent=2) if a.json else format_summary(summary))
     return 0
@@ -45,6 +46,8 @@ def add_commands(sub) -> None:
     c.add_argument("--standing-seconds", type=float, default=5.0, help="straight-leg phase (0: none)")
     c.add_argument("--knee-error-deg", type=float, default=0.3,
                    help="true knee minus mechanical straight angle while standing (default 0.3)")
+    c.add_argument("--protocol", default=None, help="a protocol file (legcal-bench design --out): record its stances "
+                                                    "instead of --stances")
     c.add_argument("--period-scale", type=float, default=1.0,
                    help="slower posture motion: its periods x this (2: a quarter of the IMU's motion acceleration; "
                         "give --stance-seconds x this to cover the same motion)")

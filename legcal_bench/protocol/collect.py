@@ -23,7 +23,8 @@ from legcal_bench.data.recording import MANIFEST, Recording, Truth, is_session_d
 from legcal_bench.errors import ConfigError, HoldError, IKError
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.protocol.servos import servo_gains
-from legcal_bench.protocol.stances import ALL_STANCES, STANCES, feasible_trajectory, fit_stance, place, posture_bounds
+from legcal_bench.protocol.stances import (ALL_STANCES, STANCES, feasible_trajectory, fit_stance, load_protocol, place,
+                                          posture_bounds)
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -56,6 +57,17 @@ class CollectConfig:
     # The posture motion's periods x this: 2 = twice as slow, a quarter of the IMU's
     # motion acceleration (give twice the --stance-seconds to cover the same cycles).
     period_scale: float = 1.0
+    # A protocol file (`legcal-bench design --out`): its stances replace `stances`.
+    protocol: str | None = None
+
+
+def stance_catalog(cfg: CollectConfig) -> tuple[dict, tuple[str, ...]]:
+    """(every stance by name, the stances to record): the built-ins and `cfg.stances`,
+    or with a protocol file its stances."""
+    if cfg.protocol is None:
+        return ALL_STANCES, tuple(cfg.stances)
+    designed = load_protocol(cfg.protocol)
+    return {**ALL_STANCES, **designed}, tuple(designed)
 
 
 @dataclass
@@ -87,16 +99,17 @@ class CollectSummary:
 
 
 def _segments(cfg: CollectConfig, rng: np.random.Generator):
+    catalog, stances = stance_catalog(cfg)
     if cfg.standing_s > 0:
         yield "standing", "standing", "standing", cfg.standing_s, 0.0, 0.0
-    for s in cfg.stances:
-        if s not in STANCES:
-            raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}")
+    for s in stances:
+        if s not in catalog or s == "standing":
+            raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}, or a protocol file (--protocol)")
         yield f"stance_{s}", "stance", s, cfg.stance_s, cfg.jitter_m, cfg.jitter_rad
     # Held-out sessions are drawn from the stances being recorded (a robot that cannot
     # hold a lunge is not asked for one in its held-out sessions either).
     for i in range(cfg.heldout):
-        s = str(rng.choice(list(cfg.stances)))
+        s = str(rng.choice(list(stances)))
         yield f"heldout_{i + 1}", "heldout", s, cfg.heldout_s, cfg.heldout_jitter_m, cfg.heldout_jitter_rad
 
 
@@ -122,12 +135,12 @@ def is_collected(out_dir: str | Path, cfg: CollectConfig) -> bool:
 
 
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,
-                   jitter_rad: float, progress=None, period_scale: float = 1.0) -> Segment:
+                   jitter_rad: float, progress=None, period_scale: float = 1.0, catalog: dict = ALL_STANCES) -> Segment:
     """Run one segment of `stance` (fitted to the robot, `fit_stance`). The posture
     motion's IK is solved once, in one batch (`feasible_trajectory`), and handed to the
     simulator (`DoubleSupportSim.run`)."""
     rng = np.random.default_rng(seed)  # the stream Gymnasium's reset(seed=seed) gives the env
-    fitted = fit_stance(ALL_STANCES[stance], sim.nominal)
+    fitted = fit_stance(catalog[stance], sim.nominal)
     for attempt in range(PLACEMENT_TRIES):
         # A jittered placement out of reach is drawn again (the built-ins never need to).
         placement = place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad)
@@ -136,7 +149,7 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
             break
         except IKError as e:
             if attempt == PLACEMENT_TRIES - 1:
-                raise IKError(f"stance {stance} ({ALL_STANCES[stance].label}): its nominal posture is out of this "
+                raise IKError(f"stance {stance} ({catalog[stance].label}): its nominal posture is out of this "
                               f"robot's reach ({e}); record the other stances (--stances), or widen the joint's "
                               "range in the MJCF if the real robot allows it") from None
     sim.observe(rng)  # the reset observation (not logged; its noise draws keep the env's stream)
@@ -153,7 +166,8 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
     return Segment(*sim.run(clipped, rng, q_cmd=q_cmd, progress=progress), fitted.scale, motion.scale)
 
 
-def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains_note: str = "") -> HoldReport:
+def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains_note: str = "",
+               label: str | None = None) -> HoldReport:
     """The hold check of one recorded segment; raises HoldError naming the stance, what
     moved, the likely cause and the leg-map field that fixes it."""
     report = HoldReport.from_truth(truth, sim.true_kin.dims.leg_length)
@@ -170,7 +184,7 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
            "check the sole frames and corners in the leg map (legs.<side>.sole, legs.<side>.corners), or record "
            "fewer stances (--stances)")
     raise HoldError(
-        f"segment {name}, stance {stance} ({ALL_STANCES[stance].label}, {sim.mode} mode): the robot did not hold "
+        f"segment {name}, stance {stance} ({label or ALL_STANCES[stance].label}, {sim.mode} mode): the robot did not hold "
         f"the posture: {'; '.join(failures)}. Likely cause: {cause} (left-leg kp in use, N m/rad: {gains}; "
         f"sources {sorted(set(sc.servo_source))}{'; ' + gains_note if gains_note else ''}). Fix: {fix}.")
 
@@ -193,6 +207,7 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
         sim_sensors(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains)
+    catalog, _ = stance_catalog(cfg)
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0])))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
@@ -208,8 +223,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         for (name, kind, stance, duration, jm, jr), seed in zip(plan, seeds):
             bar.set_postfix_str(name)
             obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar,
-                                                                 cfg.period_scale)
-            hold = check_hold(sim, name, stance, tr, gains.note if gains else "")
+                                                                 cfg.period_scale, catalog)
+            hold = check_hold(sim, name, stance, tr, gains.note if gains else "", catalog[stance].label)
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
                 time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],

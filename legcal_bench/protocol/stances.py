@@ -200,3 +200,61 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
         return Motion(traj, q, shrink ** k) if return_q else traj
     raise IKError(f"stance {placement.stance.name}: no reachable, balanced posture motion for this robot "
                   f"(the nominal posture itself may be out of reach or off balance)")
+
+
+# ----------------------------------------------------------------- protocol files
+PROTOCOL_FORMAT = "legcal-protocol"
+_STANCE_FIELDS = ("left_x", "right_x", "extra_width", "toe_out", "depth")
+
+
+def write_protocol(path, stances: list[Stance], meta: dict | None = None):
+    """A stance protocol as a YAML file a robot team can take to their robot: each
+    stance's placement (leg lengths, rad), squat depth and posture-motion amplitudes."""
+    import yaml
+
+    from legcal_bench.files.atomic import atomic_write_text
+
+    doc = {"format": PROTOCOL_FORMAT, "version": 1, **(meta or {}),
+           "stances": [{"name": st.name, "label": st.label, **{k: float(getattr(st, k)) for k in _STANCE_FIELDS},
+                        "amplitude": [float(a) for a in st.amplitude]} for st in stances]}
+    return atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
+
+
+def load_protocol(path) -> dict[str, Stance]:
+    """The stances of a protocol file, by name; ConfigError naming the field and the fix."""
+    import yaml
+
+    from legcal_bench.errors import ConfigError
+
+    try:
+        doc = yaml.safe_load(open(path).read())
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"protocol {path}: not a readable YAML file ({e})") from None
+    if not isinstance(doc, dict) or doc.get("format") != PROTOCOL_FORMAT:
+        raise ConfigError(f"protocol {path}: field 'format' must be {PROTOCOL_FORMAT!r} (write one with "
+                          "legcal-bench design --out)")
+    items = doc.get("stances")
+    if not isinstance(items, list) or not items:
+        raise ConfigError(f"protocol {path}: field 'stances' must list at least one stance")
+    out: dict[str, Stance] = {}
+    for i, d in enumerate(items):
+        where = f"protocol {path}: stances[{i}]"
+        if not isinstance(d, dict) or not isinstance(d.get("name"), str) or not d["name"]:
+            raise ConfigError(f"{where}: needs a 'name' (a string)")
+        name = d["name"]
+        if name in ALL_STANCES or name in out:
+            raise ConfigError(f"{where}: name {name!r} is taken (built-in stances and earlier entries); rename it")
+        vals = {}
+        for k in _STANCE_FIELDS:
+            v = d.get(k, getattr(Stance, k))
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or abs(v) > 1.0:
+                raise ConfigError(f"{where}: field '{k}' must be a finite number within [-1, 1] (leg lengths or rad), "
+                                  f"got {v!r}")
+            vals[k] = float(v)
+        amp = d.get("amplitude", list(Stance.amplitude))
+        if (not isinstance(amp, list) or len(amp) != 6
+                or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= 0.5 for a in amp)):
+            raise ConfigError(f"{where}: field 'amplitude' must be 6 numbers in [0, 0.5] (x, y, z in leg lengths; "
+                              f"roll, pitch, yaw in rad), got {amp!r}")
+        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=tuple(float(a) for a in amp), **vals)
+    return out
