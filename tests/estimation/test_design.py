@@ -42,3 +42,28 @@ def test_design_command_reports_default_and_designed(capsys):
     assert set(d) >= {"default", "designed", "designed_stances", "frames"} and len(d["designed_stances"]) == 2
     assert d["designed"]["eigenvalues"][0] > 0 and len(d["designed"]["std_deg"]) == 12
     assert main(["design", "--robot", "a3", "--count", "5", "--candidates", "3"]) == 2
+
+
+def test_a_protocol_file_round_trips_and_collects(tmp_path):
+    import pytest
+
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.protocol.stances import Stance, load_protocol, write_protocol
+
+    st = [Stance("D1", "designed", left_x=0.05, right_x=-0.05, depth=0.1), Stance("D2", "designed", toe_out=0.1)]
+    path = write_protocol(tmp_path / "p.yaml", st, {"robot": "a3"})
+    assert list(load_protocol(path).values()) == st
+    out = tmp_path / "set"
+    collect(CollectConfig(robot="a3", mode="kinematic", protocol=str(path), stance_s=2.0, heldout=1, heldout_s=1.0,
+                          standing_s=0.0), out, progress=False)
+    recs = load_session(out)
+    assert [r.stance for r in recs] == ["D1", "D2", recs[2].stance] and recs[2].stance in ("D1", "D2")
+    text = path.read_text()
+    for bad, message in ((text.replace("depth: 0.1", "depth: abc"), r"stances\[0\]: field 'depth' must be a finite"),
+                         (text.replace("name: D1", "name: II"), r"name 'II' is taken"),
+                         ("format: x\n", "field 'format' must be 'legcal-protocol'")):
+        (tmp_path / "bad.yaml").write_text(bad)
+        with pytest.raises(ConfigError, match=message):
+            load_protocol(tmp_path / "bad.yaml")
