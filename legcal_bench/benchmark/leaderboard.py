@@ -241,3 +241,31 @@ def generate(root: str | Path = "leaderboard") -> str:
     text = "\n".join(L)
     atomic_write_text(root / "README.md", text)
     return text
+
+
+def compare(a: str | Path, b: str | Path, robot: str, mode: str, metric: str = "recovery_rms") -> list[dict]:
+    """Two result folders (e.g. a designed protocol's and the default's) paired seed by
+    seed for one robot and floor: per calibrator variant, the seeds both have, each
+    side's mean of `metric` (a `METRICS` key) over those seeds, and how often `a` is
+    lower."""
+    get = METRICS[metric][1]
+
+    def cells(root):
+        groups, _ = load_results(Path(root))
+        out: dict = {}
+        for (suite, rb, md), g in groups.items():
+            if rb == robot and md == mode:
+                for name, cs in g.items():
+                    out.setdefault(name, {}).update({c["cell"]["seed"]: c for c in cs})
+        return out
+
+    ca, cb = cells(a), cells(b)
+    rows = []
+    for name in sorted(set(ca) & set(cb)):
+        seeds = sorted(set(ca[name]) & set(cb[name]))
+        if not seeds:
+            continue
+        va, vb = [get(ca[name][k]) for k in seeds], [get(cb[name][k]) for k in seeds]
+        rows.append({"variant": name, "seeds": seeds, "a_mean": float(np.mean(va)), "b_mean": float(np.mean(vb)),
+                     "a_lower": int(sum(x < y for x, y in zip(va, vb)))})
+    return rows

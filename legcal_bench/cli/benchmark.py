@@ -114,6 +114,23 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
                         "uniform per joint), paper-base (the paper's real robots' base offsets), none")
 
 
+def cmd_compare(a: argparse.Namespace) -> int:
+    from legcal_bench.benchmark.leaderboard import METRICS, compare
+    from legcal_bench.errors import ConfigError
+
+    if a.metric not in METRICS:
+        raise ConfigError(f"--metric {a.metric!r}: use one of {list(METRICS)}")
+    rows = compare(a.a, a.b, a.robot, a.mode, a.metric)
+    if not rows:
+        raise ConfigError(f"no calibrator variant has results for robot {a.robot!r}, mode {a.mode!r} in both "
+                          f"{a.a} and {a.b}")
+    print(f"{METRICS[a.metric][0]}, {a.robot}, {a.mode}: A = {a.a}, B = {a.b}, paired by seed")
+    for r in rows:
+        print(f"  {r['variant']:22s} {len(r['seeds'])} seeds: A {r['a_mean']:.4f}, B {r['b_mean']:.4f}; "
+              f"A lower in {r['a_lower']}/{len(r['seeds'])}")
+    return 0
+
+
 def cmd_leaderboard(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark.leaderboard import generate
 
@@ -138,6 +155,15 @@ def add_commands(sub) -> None:
     bn.add_argument("--out", default="leaderboard", help="leaderboard root: results/ and README.md (default leaderboard)")
     bn.add_argument("--quiet", action="store_true")
     bn.set_defaults(func=cmd_bench)
+
+    cp = sub.add_parser("compare", help="two result folders (e.g. a designed protocol's and the default's) "
+                                        "paired seed by seed, per calibrator variant")
+    cp.add_argument("--a", required=True, help="result folder A (e.g. leaderboard/designed_a2/results)")
+    cp.add_argument("--b", required=True, help="result folder B (e.g. leaderboard/results)")
+    cp.add_argument("--robot", required=True)
+    cp.add_argument("--mode", default="weld")
+    cp.add_argument("--metric", default="recovery_rms", help="a leaderboard metric key (default recovery_rms)")
+    cp.set_defaults(func=cmd_compare)
 
     sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask")
     _robot_options(sw, ["a2", "a3"])
