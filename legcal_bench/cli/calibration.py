@@ -177,6 +177,10 @@ def cmd_design(a: argparse.Namespace) -> int:
         print(f"  {name:8s} smallest eigenvalues {', '.join(f'{v:.3g}' for v in s['eigenvalues'])}; "
               f"kappa {s['kappa']:.3g}; worst offset std {max(s['std_deg'].values()):.4f} deg; pitch-sum std "
               + ", ".join(f"{k} {v:.4f}" for k, v in s["pitch_sum_std_deg"].items()) + " deg")
+    if a.plot:
+        from legcal_bench.reports.design import plot_design
+
+        print(f"wrote {plot_design(d, kin.legmap.name, a.plot)}")
     if a.out:
         from legcal_bench.protocol.stances import write_protocol
 
@@ -257,6 +261,8 @@ def add_commands(sub) -> None:
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
     de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "
                                                 "collect/bench --protocol")
+    de.add_argument("--plot", default=None, help="write a PNG: smallest eigenvalues and per-offset predicted std, "
+                                                 "default against designed")
     de.add_argument("--json", action="store_true")
     de.set_defaults(func=cmd_design)
 

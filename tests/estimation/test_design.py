@@ -44,6 +44,12 @@ def test_design_command_reports_default_and_designed(capsys):
     assert main(["design", "--robot", "a3", "--count", "5", "--candidates", "3"]) == 2
 
 
+def test_design_plot(tmp_path, capsys):
+    png = tmp_path / "design.png"
+    assert main(["design", "--robot", "a2", "--candidates", "8", "--count", "2", "--plot", str(png)]) == 0
+    assert png.stat().st_size > 10_000 and f"wrote {png}" in capsys.readouterr().out
+
+
 def test_a_protocol_file_round_trips_and_collects(tmp_path):
     import pytest
 
