@@ -284,6 +284,14 @@ def _gravity_errors(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray) -> tuple
     return float(np.median(ang)), float(np.sqrt((moving ** 2).sum(axis=1).mean()))
 
 
+def _gravity_fit(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray, dq: np.ndarray,
+                 limits: CheckLimits) -> tuple[float, float, float]:
+    """(badness against the limits, median angle, moving RMS) of the IMU's vertical
+    against the posture's, raw or corrected by `dq`, whichever fits better."""
+    return min((max(ang / limits.gravity_rad, mov / limits.gravity_motion_rad), ang, mov)
+               for ang, mov in (_gravity_errors(kin, Q + d, acc) for d in (np.zeros(12), dq)))
+
+
 def _signed_permutations():
     for perm in itertools.permutations(range(3)):
         for signs in itertools.product((1, -1), repeat=3):
@@ -300,13 +308,11 @@ def imu_axes(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
     the per-stance changes, each stance is judged on the raw encoders and with `dq`, and
     the better fit counts."""
     idx = [_subsample(r, limits.max_frames) for r in stances]
-    Qs = [[r.q_enc[i], r.q_enc[i] + dq] for r, i in zip(stances, idx)]
+    Qs = [r.q_enc[i] for r, i in zip(stances, idx)]
     accs = [r.imu_acc[i] for r, i in zip(stances, idx)]
 
     def badness(k, P=None):
-        a = accs[k] if P is None else accs[k] @ P.T
-        return min((max(ang / limits.gravity_rad, mov / limits.gravity_motion_rad), ang, mov)
-                   for ang, mov in (_gravity_errors(kin, Q, a) for Q in Qs[k]))
+        return _gravity_fit(kin, Qs[k], accs[k] if P is None else accs[k] @ P.T, dq, limits)
 
     errs = [badness(k) for k in range(len(stances))]
     bad = [k for k, e in enumerate(errs) if e[0] > 1.0]
@@ -420,8 +426,7 @@ def statistics(kin: LegKinematics, r: Recording, dq: np.ndarray | None = None,
     z, tilt = coplanarity(kin, r, dq, limits)
     out["soles_height_mm"], out["soles_tilt_deg"] = 1e3 * z, float(np.degrees(tilt))
     acc = r.imu_acc[_subsample(r, limits.max_frames)]
-    ang, mov = min((_gravity_errors(kin, Q + d, acc) for d in (np.zeros(12), dq)),
-                   key=lambda e: max(e[0] / limits.gravity_rad, e[1] / limits.gravity_motion_rad))
+    _, ang, mov = _gravity_fit(kin, Q, acc, dq, limits)
     out["gravity_deg"], out["gravity_motion_deg"] = float(np.degrees(ang)), float(np.degrees(mov))
     c = end_changes(kin, r, dq, limits) if r.kind == "stance" else None
     if c is not None:

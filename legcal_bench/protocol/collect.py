@@ -98,8 +98,7 @@ class CollectSummary:
     sim_s: float = 0.0
 
 
-def _segments(cfg: CollectConfig, rng: np.random.Generator):
-    catalog, stances = stance_catalog(cfg)
+def _segments(cfg: CollectConfig, rng: np.random.Generator, catalog: dict, stances: tuple[str, ...]):
     if cfg.standing_s > 0:
         yield "standing", "standing", "standing", cfg.standing_s, 0.0, 0.0
     for s in stances:
@@ -207,9 +206,9 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
         sim_sensors(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains)
-    catalog, _ = stance_catalog(cfg)
+    catalog, stances = stance_catalog(cfg)
     ss = np.random.SeedSequence(cfg.seed)
-    plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0])))
+    plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0]), catalog, stances))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
     total = sum(int(round(duration * cfg.rate_hz)) for _, _, _, duration, _, _ in plan)
     summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names,

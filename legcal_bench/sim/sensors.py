@@ -110,7 +110,7 @@ class ImuErrors:
         """Rotation of the actual IMU frame in the nominal IMU frame (computed once)."""
         return Rotation.from_euler("xyz", self.imu_mount_rpy).as_matrix()
 
-    def vertical(self, up_I: np.ndarray = np.array([0.0, 0.0, 1.0])) -> np.ndarray:
+    def vertical(self, up_I: np.ndarray) -> np.ndarray:
         """The up direction a static accelerometer reports, in the nominal IMU frame,
         when the true one is `up_I` (noise-free): tilted by the mount, pulled by the bias."""
         f = self.mount_rotation.T @ (G * np.asarray(up_I, dtype=float)) + np.asarray(self.accel_bias)

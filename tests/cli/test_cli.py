@@ -60,12 +60,18 @@ def test_render_writes_a_png(tmp_path, capsys):
     assert img.shape == (480, 640, 3) and img.std() > 10  # not a blank frame
 
 
-def test_calibrate_then_score(tmp_path, capsys):
+def _zero_noise_set(tmp_path, capsys, robot: str, heldout: int) -> Path:
+    """A short zero-noise kinematic session set through the CLI."""
     bags = tmp_path / "bags"
-    assert main(["collect", "--robot", "a2", "--mode", "kinematic", "--sensors", "zero", "--out", str(bags),
-                 "--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "2",
-                 "--quiet"]) == 0
+    assert main(["collect", "--robot", robot, "--mode", "kinematic", "--sensors", "zero", "--out", str(bags),
+                 "--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout",
+                 str(heldout), "--quiet"]) == 0
     capsys.readouterr()
+    return bags
+
+
+def test_calibrate_then_score(tmp_path, capsys):
+    bags = _zero_noise_set(tmp_path, capsys, "a2", 2)
     out = tmp_path / "result.json"
     assert main(["calibrate", "--robot", "a2", "--bags", str(bags), "--calibrator", "interfoot",
                  "--setting", "matched", "--out", str(out), "--plots", str(tmp_path)]) == 0
@@ -118,11 +124,7 @@ def test_only_legcal_errors_exit_2_an_internal_error_keeps_its_traceback(monkeyp
 def test_calibrate_with_yamane_then_score(tmp_path, capsys):
     """The Yamane calibrator through the CLI: its result prints, saves, reloads and
     scores (it once crashed in the result formatter after writing its JSON)."""
-    bags = tmp_path / "bags"
-    assert main(["collect", "--robot", "a3", "--mode", "kinematic", "--sensors", "zero", "--out", str(bags),
-                 "--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "1",
-                 "--quiet"]) == 0
-    capsys.readouterr()
+    bags = _zero_noise_set(tmp_path, capsys, "a3", 1)
     out = tmp_path / "yamane.json"
     assert main(["calibrate", "--robot", "a3", "--bags", str(bags), "--calibrator", "yamane",
                  "--option", "tol=1e-12", "--out", str(out)]) == 0
