@@ -152,19 +152,27 @@ def cmd_check(a: argparse.Namespace) -> int:
 
 def cmd_design(a: argparse.Namespace) -> int:
     """Predicted information of the default stances against a greedy E-optimal choice
-    of sampled stances (issue #12, first part: predicted only, not yet collected)."""
+    of sampled stances, each screened in simulation for the hold check (weld, contact)."""
     from legcal_bench.estimation.design import design
     from legcal_bench.protocol.stances import STANCES
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.kinematics import LegKinematics
 
     if a.count < 1 or a.candidates < a.count:
-        from legcal_bench.errors import ConfigError
-
         raise ConfigError(f"--count {a.count} / --candidates {a.candidates}: need 1 <= count <= candidates")
     kin = LegKinematics(load_robot(a.robot, a.mjcf))
-    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, seed=a.seed, sensors=a.sensors,
-               ranges=a.ranges)
+    frames = 2400
+    screen = None
+    if not a.no_screen:
+        from legcal_bench.benchmark.plan import NATIVE
+        from legcal_bench.protocol.screen import HoldScreen
+
+        if a.screen_seeds < 1:
+            raise ConfigError(f"--screen-seeds {a.screen_seeds}: use at least 1 (or --no-screen)")
+        screen = HoldScreen(kin.legmap, NATIVE, seeds=tuple(range(a.screen_seeds)), margin=a.margin,
+                            duration_s=frames / a.count / 50)
+    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
+               sensors=a.sensors, ranges=a.ranges, screen=screen, progress=not a.json)
     if a.json:
         from dataclasses import asdict
 
@@ -172,6 +180,11 @@ def cmd_design(a: argparse.Namespace) -> int:
         return 0
     print(f"{kin.legmap.name}: {d['frames']} frames in all; {d['candidates_fitting']} of {a.candidates} sampled "
           f"stances fit the robot (predicted from the kinematics, {a.sensors} sensor noise)")
+    if screen is not None:
+        held = sum(r["held"] for r in d["screened"].values())
+        print(f"  hold screen ({' and '.join(screen.modes)}, {len(screen.seeds)} seeds, hold limits x {screen.margin:g}): "
+              f"{held} of {len(d['screened'])} screened stances held; the default stances: "
+              + ", ".join(f"{n} {'held' if r['held'] else 'failed'}" for n, r in d["default_screen"].items()))
     for name in ("default", "designed"):
         s = d[name]
         print(f"  {name:8s} smallest eigenvalues {', '.join(f'{v:.3g}' for v in s['eigenvalues'])}; "
@@ -183,11 +196,16 @@ def cmd_design(a: argparse.Namespace) -> int:
         print(f"wrote {plot_design(d, kin.legmap.name, a.plot)}")
     if a.out:
         from legcal_bench.protocol.stances import write_protocol
+        from legcal_bench.provenance import code_version, describe
 
         path = write_protocol(a.out, d["designed_stances"], {
             "robot": kin.legmap.name, "frames": d["frames"], "stance_s": d["frames"] / len(d["designed_stances"]) / 50,
             "made_by": f"legcal-bench design --robot {a.robot} --count {a.count} --candidates {a.candidates} "
-                       f"--ranges {a.ranges} --seed {a.seed}"})
+                       f"--ranges {a.ranges} --seed {a.seed}"
+                       + (" --no-screen" if a.no_screen else f" --margin {a.margin:g} --screen-seeds {a.screen_seeds}"),
+            "code": describe(code_version()),
+            "predicted": {"default": d["default"], "designed": d["designed"]},
+            "hold_screen": {st.name: d["screened"].get(st.name) for st in d["designed_stances"]}})
         print(f"wrote {path}: collect it with legcal-bench collect --protocol {path} --stance-seconds "
               f"{d['frames'] / len(d['designed_stances']) / 50:g}")
     for st, scale in zip(d["designed_stances"], d["motion_scales"]):
@@ -250,8 +268,9 @@ def add_commands(sub) -> None:
     ck.add_argument("--json", action="store_true")
     ck.set_defaults(func=cmd_check)
 
-    de = sub.add_parser("design", help="stance design, first part: the default stances' predicted information "
-                                       "against a greedy E-optimal choice of sampled stances (same frame count)")
+    de = sub.add_parser("design", help="stance design: the default stances' predicted information against a "
+                                       "greedy E-optimal choice of sampled stances the robot holds in simulation "
+                                       "(same frame count)")
     robot_args(de)
     de.add_argument("--count", type=int, default=4, help="stances to choose (default 4)")
     de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
@@ -259,6 +278,12 @@ def add_commands(sub) -> None:
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
+    de.add_argument("--margin", type=float, default=0.8, help="hold screen: the fraction of the hold check's limits "
+                                                              "a chosen stance must stay within (default 0.8)")
+    de.add_argument("--screen-seeds", type=int, default=4, help="hold screen: seeds per mode (placement jitter, "
+                                                                 "motion phases, factory offsets; default 4)")
+    de.add_argument("--no-screen", action="store_true", help="skip the hold screen (kinematics only; the collected "
+                                                             "protocol may then fail the hold check)")
     de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "
                                                 "collect/bench --protocol")
     de.add_argument("--plot", default=None, help="write a PNG: smallest eigenvalues and per-offset predicted std, "

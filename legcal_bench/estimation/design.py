@@ -13,17 +13,22 @@ the true offsets, on a level floor with the IMU's true vertical:
 estimates, hence the Schur complement; the flat-ground rows as they are), whitened by
 the declared sensor model (`noise_sigmas`). A protocol's information is the sum over
 its stances; its predicted standard deviations are sqrt(diag(H^-1)). Predicted, not
-measured: the hold check in weld and contact mode and the recovery over seeds come
-with the collected protocol (the rest of issue #12).
+measured: whether the robot holds a stance is asked of the physics by a screen
+(`legcal_bench.protocol.screen.HoldScreen`, passed as `screen`): the greedy choice takes
+the best candidate that passes it, and an exchange pass then swaps chosen stances for
+passing candidates while the smallest eigenvalue grows (Fedorov's exchange). The
+recovery over seeds comes with the collected protocol (`bench --protocol`).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
+from tqdm import tqdm
 
-from legcal_bench.errors import IKError
+from legcal_bench.errors import ConfigError, IKError
 from legcal_bench.estimation.levelling import levelling_rotations
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.residuals import flat_residuals
@@ -84,16 +89,47 @@ def sample_stances(n: int, rng: np.random.Generator, ranges: str = "default") ->
             for i in range(n)]
 
 
-def greedy_design(candidates: list[StanceInfo], k: int) -> list[int]:
+def _lambda_min(H: np.ndarray) -> float:
+    return float(np.linalg.eigvalsh(H)[0])
+
+
+def greedy_design(candidates: list[StanceInfo], k: int, accept: Callable[[int], bool] | None = None,
+                  exchange: bool = True) -> list[int]:
     """Indices of `k` candidates chosen one at a time, each maximizing the smallest
-    eigenvalue of the summed information (E-optimal)."""
+    eigenvalue of the summed information (E-optimal) among those `accept` passes
+    (asked lazily, best first, each index at most once); then, with `exchange`, any
+    chosen stance is swapped for a passing candidate while that raises the smallest
+    eigenvalue. Raises ConfigError if fewer than `k` candidates pass."""
+    verdict: dict[int, bool] = {}
+
+    def ok(j: int) -> bool:
+        if j not in verdict:
+            verdict[j] = True if accept is None else bool(accept(j))
+        return verdict[j]
+
     chosen: list[int] = []
     H = np.zeros((12, 12))
     for _ in range(k):
-        best = max((j for j in range(len(candidates)) if j not in chosen),
-                   key=lambda j: np.linalg.eigvalsh(H + candidates[j].H)[0])
+        order = sorted((j for j in range(len(candidates)) if j not in chosen and verdict.get(j, True)),
+                       key=lambda j: -_lambda_min(H + candidates[j].H))
+        best = next((j for j in order if ok(j)), None)
+        if best is None:
+            raise ConfigError(f"stance design: only {len(chosen)} of {len(candidates)} candidate stances pass the hold "
+                              f"screen and {k} are asked for; sample more (--candidates), narrower ones "
+                              "(--ranges default), or fewer (--count)")
         chosen.append(best)
         H = H + candidates[best].H
+    improved = exchange
+    while improved:
+        improved = False
+        for slot in range(k):
+            rest = H - candidates[chosen[slot]].H
+            order = sorted((j for j in range(len(candidates)) if j not in chosen and verdict.get(j, True)
+                            and _lambda_min(rest + candidates[j].H) > _lambda_min(H) * (1 + 1e-9)),
+                           key=lambda j: -_lambda_min(rest + candidates[j].H))
+            best = next((j for j in order if ok(j)), None)
+            if best is not None:
+                chosen[slot], H, improved = best, rest + candidates[best].H, True
     return chosen
 
 
@@ -113,19 +149,33 @@ def summary(kin: LegKinematics, H: np.ndarray) -> dict:
 
 
 def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: int = 60, frames: int = 2400,
-           seed: int = 0, sensors: str = "realistic", ranges: str = "default") -> dict:
+           seed: int = 0, sensors: str = "realistic", ranges: str = "default",
+           screen: Callable[[Stance], object] | None = None, progress: bool = False) -> dict:
     """The default protocol against `k` stances chosen from `candidates` sampled ones,
-    at the same total frame count; candidates that do not fit the robot are skipped."""
+    at the same total frame count; candidates that do not fit the robot are skipped,
+    and with `screen` (stance -> a report with `.held` and `.to_dict()`, e.g.
+    `HoldScreen`) those the robot does not hold."""
     rng = np.random.default_rng(seed)
     default_info = [stance_information(kin, s, frames // len(default), seed=seed, sensors=sensors) for s in default]
     pool = []
-    for st in sample_stances(candidates, rng, ranges):
+    for st in tqdm(sample_stances(candidates, rng, ranges), desc="stance information", disable=not progress):
         try:
             pool.append(stance_information(kin, st, frames // k, seed=seed, sensors=sensors))
         except IKError:
             continue
-    chosen = [pool[j] for j in greedy_design(pool, k)]
-    return {"default": summary(kin, sum(s.H for s in default_info)),
+    screened: dict[str, dict] = {}
+
+    def accept(j: int) -> bool:
+        report = screen(pool[j].stance)
+        screened[pool[j].stance.name] = report.to_dict()
+        if progress:
+            tqdm.write(f"  hold screen {pool[j].stance.name}: {'held' if report.held else 'failed'}")
+        return report.held
+
+    chosen = [pool[j] for j in greedy_design(pool, k, accept if screen is not None else None)]
+    # The default stances through the same screen, for comparison (never rejected).
+    default_screen = {s.name: screen(s).to_dict() for s in default} if screen is not None else {}
+    return {"default_screen": default_screen,"default": summary(kin, sum(s.H for s in default_info)),
             "designed": summary(kin, sum(s.H for s in chosen)),
             "designed_stances": [c.stance for c in chosen], "motion_scales": [c.motion_scale for c in chosen],
-            "candidates_fitting": len(pool), "frames": frames}
+            "candidates_fitting": len(pool), "frames": frames, "screened": screened}

@@ -34,19 +34,69 @@ def test_greedy_design_picks_what_fills_the_weakest_direction():
     assert 2 in chosen and len(set(chosen)) == 2
 
 
+def test_greedy_design_takes_only_what_the_screen_passes_and_says_when_too_few_do():
+    import pytest
+
+    from legcal_bench.errors import ConfigError
+
+    e = np.eye(12)
+    infos = [StanceInfo(STANCES["I"], (j + 1) * e, 1.0) for j in range(4)]
+    asked = []
+
+    def accept(j):
+        asked.append(j)
+        return j != 3
+
+    # The best (3) fails the screen: the next best two are taken; each is asked once.
+    assert sorted(greedy_design(infos, 2, accept)) == [1, 2] and sorted(asked) == [1, 2, 3]
+    with pytest.raises(ConfigError, match="only 1 of 4 candidate stances pass the hold screen"):
+        greedy_design(infos, 2, lambda j: j == 0)
+
+
+def test_exchange_repairs_a_greedy_choice():
+    # Greedy takes the uniform stance first (the others each leave six directions empty)
+    # and is stuck with it; exchanging it for the complement of the second choice
+    # raises the smallest eigenvalue tenfold.
+    uniform = StanceInfo(STANCES["I"], np.eye(12), 1.0)
+    first = StanceInfo(STANCES["II"], np.diag([10.0] * 6 + [0.0] * 6), 1.0)
+    second = StanceInfo(STANCES["III"], np.diag([0.0] * 6 + [10.0] * 6), 1.0)
+    assert 0 in greedy_design([uniform, first, second], 2, exchange=False)
+    assert sorted(greedy_design([uniform, first, second], 2)) == [1, 2]
+
+
+def test_hold_screen_passes_stance_one_and_fails_a_motion_the_robot_cannot_hold():
+    from dataclasses import replace
+
+    from legcal_bench.protocol.screen import HoldScreen
+
+    screen = HoldScreen(load_robot("a2"), "random:1.2", seeds=(0,), duration_s=4.0)
+    ok = screen(STANCES["I"])
+    assert ok.held and set(ok.reports) == {"weld", "contact"} and ok.reports["weld"].pelvis_limit_m < 0.05 * 1.04
+    # Stance I's motion five times over, in a deep squat: the robot tips over in contact mode.
+    wild = replace(STANCES["I"], name="wild", depth=0.2, amplitude=tuple(5 * a for a in STANCES["I"].amplitude))
+    bad = screen(wild)
+    assert not bad.held and any(f.startswith("contact:") for f in bad.failures())
+
+
 def test_design_command_reports_default_and_designed(capsys):
-    assert main(["design", "--robot", "a3", "--candidates", "12", "--count", "2", "--json"]) == 0
+    assert main(["design", "--robot", "a2", "--candidates", "12", "--count", "2", "--screen-seeds", "1",
+                 "--json"]) == 0
     import json
 
     d = json.loads(capsys.readouterr().out)
     assert set(d) >= {"default", "designed", "designed_stances", "frames"} and len(d["designed_stances"]) == 2
     assert d["designed"]["eigenvalues"][0] > 0 and len(d["designed"]["std_deg"]) == 12
+    # Every chosen stance passed the hold screen in both modes.
+    for st in d["designed_stances"]:
+        rep = d["screened"][st["name"]]
+        assert rep["held"] and rep["weld"]["pelvis_mm"] <= rep["weld"]["pelvis_limit_mm"] and "contact" in rep
+    assert set(d["default_screen"]) == set(STANCES)
     assert main(["design", "--robot", "a3", "--count", "5", "--candidates", "3"]) == 2
 
 
 def test_design_plot(tmp_path, capsys):
     png = tmp_path / "design.png"
-    assert main(["design", "--robot", "a2", "--candidates", "8", "--count", "2", "--plot", str(png)]) == 0
+    assert main(["design", "--robot", "a2", "--candidates", "8", "--count", "2", "--no-screen", "--plot", str(png)]) == 0
     assert png.stat().st_size > 10_000 and f"wrote {png}" in capsys.readouterr().out
 
 
