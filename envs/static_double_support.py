@@ -23,9 +23,13 @@ rad/s, and `ft` (2, 6) [force N, torque N m] per ankle in weld and contact modes
 ## Rewards
 The information gain of the new frame about the 12 offsets: the increase of
 log det(H_data + εI) of the stance's matched residuals (mm, mrad) linearised at the
-logged data, ε = 1 (`legcal_bench.estimation.information.InformationGain`): the
-objective a learned excitation policy maximizes. `information_reward=False` returns 0
-(the collector's setting; it saves ~0.3 ms a frame).
+logged data, ε = 1 (`legcal_bench.estimation.information.InformationGain`). An
+episode's return is therefore the log-determinant of the information its motion
+gathered (D-optimal design; less the reset frame's, `info["log_det_information"]`), the objective a learned excitation policy maximizes
+without knowing the calibration; `legcal-bench excite` learns a small one
+(`legcal_bench.evaluation.excitation`), and `env.unwrapped.information_matrix` gives
+H_data itself. `information_reward=False` returns 0 (the collector's setting; it
+saves ~0.3 ms a frame).
 
 ## Starting state
 `reset(seed=..., options={"stance": "I", "jitter_m": 0.015, "jitter_rad": 0.05})`
@@ -151,6 +155,12 @@ class StaticDoubleSupportEnv(MujocoEnv):
         obs = self.sim.observe(self.np_random)
         reward = self._information.add(obs["q_enc"], obs["imu_acc"]) if self._information is not None else 0.0
         return obs, reward, False, False, self._info()
+
+    @property
+    def information_matrix(self) -> np.ndarray:
+        """H_data of the episode so far (12, 12), mm and mrad units (the reward's; zeros
+        with `information_reward=False`)."""
+        return self._information.H if self._information is not None else np.zeros((12, 12))
 
     @property
     def offsets(self) -> np.ndarray:

@@ -191,6 +191,40 @@ def _provenance(g: dict) -> str:
     return "; ".join(f"{v} ({n} cells)" for v, n in sorted(versions.items()))
 
 
+DESIGNED = "designed"  # the designed protocols' leaderboard, under the main one (`bench --protocol --out`)
+
+
+def _protocol_comparison(root: Path) -> list[str]:
+    """The designed protocols (`root/designed/results`) against the default stances
+    (`root/results`), paired seed by seed per robot, weld floor: one row per variant."""
+    designed = root / DESIGNED / "results"
+    if not designed.is_dir() or not (root / "results").is_dir():
+        return []
+    groups, failed = load_results(designed)
+    L = ["## Protocols: the four default stances against a designed protocol", "",
+         f"The designed protocols (`legcal-bench design`, their own leaderboard in [{DESIGNED}/]({DESIGNED}/README.md)) "
+         "against the default stances, on the seeds both ran (paired: same seed, factory offsets, injection and "
+         "sensor noise; the stances and hence the held-out sessions differ, so held-out height is not compared). "
+         "Each cell: default → designed mean, and the seeds in which the designed protocol is lower; a designed "
+         "session set that failed the hold check is counted in the last column, and its reason is in the "
+         "designed leaderboard.", "",
+         "| robot | calibrator-variant | seeds | recovery RMS (deg) | designed lower | vs IMU vertical (deg) | "
+         "designed lower | designed seeds failed |", "|---|---|---:|---:|---:|---:|---:|---:|"]
+    for robot, mode in sorted({(rb, md) for (_, rb, md) in groups if md == "weld"}):
+        rec = {r["variant"]: r for r in compare(designed, root / "results", robot, mode, "recovery_rms")}
+        imu = {r["variant"]: r for r in compare(designed, root / "results", robot, mode, "recovery_vs_imu")}
+        fails = {name: len(cs) for (_, rb, md), g in failed.items() if (rb, md) == (robot, mode)
+                 for name, cs in g.items()}
+        for name in sorted(set(rec) - {BASELINE}):
+            r, v = rec[name], imu.get(name)
+            n = len(r["seeds"])
+            vs = "–" if v is None or not np.isfinite([v["a_mean"], v["b_mean"]]).all() else \
+                f"{v['b_mean']:.4f} → {v['a_mean']:.4f} | {v['a_lower']}/{len(v['seeds'])}"
+            L.append(f"| {robot} | {name} | {n} | {r['b_mean']:.3f} → {r['a_mean']:.3f} | {r['a_lower']}/{n} | "
+                     + (vs if "|" in vs else f"{vs} | –") + f" | {fails.get(name, 0)} |")
+    return L + [""]
+
+
 def generate(root: str | Path = "leaderboard") -> str:
     root = Path(root)
     groups, failed = load_results(root / "results")
@@ -227,6 +261,7 @@ def generate(root: str | Path = "leaderboard") -> str:
         tag = f"{suite}_{robot}_{mode}"
         L += ["", f"![held-out](plots/{plots[tag + '_heldout']}) ![spectra](plots/{plots[tag + '_spectra']})",
               "", f"![per joint](plots/{plots[tag + '_joints']})", ""]
+    L += _protocol_comparison(root)
     L += ["## Matched comparison: inter-foot vs Yamane", "",
           "Same simulated states, noise and held-out split for both methods (the paper's comparison section); "
           "each cell counts the seeds each method wins. The paper found no universal winner.", ""]

@@ -1,4 +1,4 @@
-"""`legcal-bench calibrate`, `check`, `score`, `design` and `export`."""
+"""`legcal-bench calibrate`, `check`, `score`, `design`, `excite` and `export`."""
 
 from __future__ import annotations
 
@@ -160,8 +160,11 @@ def cmd_design(a: argparse.Namespace) -> int:
 
     if a.count < 1 or a.candidates < a.count:
         raise ConfigError(f"--count {a.count} / --candidates {a.candidates}: need 1 <= count <= candidates")
+    if a.frames < 50 * a.count:
+        raise ConfigError(f"--frames {a.frames}: give at least 50 frames (1 s at 50 Hz) per stance, "
+                          f"{50 * a.count} for --count {a.count}")
     kin = LegKinematics(load_robot(a.robot, a.mjcf))
-    frames = 2400
+    frames = a.frames
     screen = None
     if not a.no_screen:
         from legcal_bench.benchmark.plan import NATIVE
@@ -200,7 +203,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 
         path = write_protocol(a.out, d["designed_stances"], {
             "robot": kin.legmap.name, "frames": d["frames"], "stance_s": d["frames"] / len(d["designed_stances"]) / 50,
-            "made_by": f"legcal-bench design --robot {a.robot} --count {a.count} --candidates {a.candidates} "
+            "made_by": f"legcal-bench design --robot {a.robot} --count {a.count} --frames {a.frames} "
+                       f"--candidates {a.candidates} "
                        f"--ranges {a.ranges} --seed {a.seed}"
                        + (" --no-screen" if a.no_screen else f" --margin {a.margin:g} --screen-seeds {a.screen_seeds}"),
             "code": describe(code_version()),
@@ -211,6 +215,36 @@ def cmd_design(a: argparse.Namespace) -> int:
     for st, scale in zip(d["designed_stances"], d["motion_scales"]):
         print(f"  designed: left_x {st.left_x:+.3f}, right_x {st.right_x:+.3f}, extra_width {st.extra_width:+.3f} "
               f"(leg lengths), toe_out {st.toe_out:+.3f} rad, depth {st.depth:.3f}, motion scale {scale:.2f}")
+    return 0
+
+
+def cmd_excite(a: argparse.Namespace) -> int:
+    """A learned open-loop excitation policy on the static env's information-gain reward,
+    against no motion and the protocol's motion."""
+    from legcal_bench.evaluation.excitation import learn_excitation
+    from legcal_bench.provenance import code_version, describe
+
+    r = learn_excitation(a.robot, a.stance, a.mode, a.frames, a.iterations, a.population, a.elite, a.seed,
+                         progress=not a.json, mjcf=a.mjcf)
+    doc = {**r.to_dict(), "code": describe(code_version()),
+           "made_by": f"legcal-bench excite --robot {a.robot} --stance {a.stance} --mode {a.mode} --frames {a.frames} "
+                      f"--iterations {a.iterations} --population {a.population} --elite {a.elite} --seed {a.seed}"}
+    if a.out:
+        from legcal_bench.files.atomic import atomic_write_json
+
+        atomic_write_json(a.out, doc)
+    if a.json:
+        print(json.dumps(doc, indent=2))
+        return 0
+    print(f"{r.robot}, stance {r.stance}, {r.mode} mode, {r.frames} frames, paper offsets, realistic sensors "
+          f"({doc['code']})")
+    print(f"  {'motion':9s} {'return':>8s} {'lambda_min':>11s} {'pelvis mm':>10s}  held  amplitude factors (x y z roll pitch yaw)")
+    for name, e in (("none", r.still), ("protocol", r.protocol), ("learned", r.learned)):
+        print(f"  {name:9s} {e.episode_return:8.2f} {e.lambda_min:11.3g} {e.pelvis_mm:10.1f}  {'yes' if e.held else 'no ':3s}  "
+              + " ".join(f"{f:.2f}" for f in e.factors))
+    print("  return = log det(H_data + I) gained; lambda_min in (mm, mrad)^-2 units of the env's information")
+    if a.out:
+        print(f"wrote {a.out}")
     return 0
 
 
@@ -273,6 +307,9 @@ def add_commands(sub) -> None:
                                        "(same frame count)")
     robot_args(de)
     de.add_argument("--count", type=int, default=4, help="stances to choose (default 4)")
+    de.add_argument("--frames", type=int, default=2400, help="frame budget of the stances in all, at 50 Hz (default "
+                                                             "2400: the default protocol's four 12 s stances); "
+                                                             "both protocols get it")
     de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
     de.add_argument("--seed", type=int, default=0)
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
@@ -290,6 +327,20 @@ def add_commands(sub) -> None:
                                                  "default against designed")
     de.add_argument("--json", action="store_true")
     de.set_defaults(func=cmd_design)
+
+    xc = sub.add_parser("excite", help="learn an open-loop excitation motion on the static env's information-gain "
+                                       "reward (cross-entropy method), against no motion and the protocol's")
+    robot_args(xc)
+    xc.add_argument("--stance", default="I", help="stance (default I)")
+    xc.add_argument("--mode", default="weld", choices=["kinematic", "weld", "contact"])
+    xc.add_argument("--frames", type=int, default=600, help="frames per episode (default 600 = 12 s at 50 Hz)")
+    xc.add_argument("--iterations", type=int, default=6)
+    xc.add_argument("--population", type=int, default=12, help="episodes per iteration (default 12)")
+    xc.add_argument("--elite", type=int, default=3, help="best episodes the next iteration is fitted to (default 3)")
+    xc.add_argument("--seed", type=int, default=0)
+    xc.add_argument("--out", default=None, help="write the result as JSON")
+    xc.add_argument("--json", action="store_true")
+    xc.set_defaults(func=cmd_excite)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
                                        "optionally a copy of its MJCF with the correction folded in")

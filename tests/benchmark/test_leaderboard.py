@@ -12,6 +12,8 @@ LEADERBOARD = Path(__file__).resolve().parents[2] / "leaderboard"
 
 def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
     shutil.copytree(LEADERBOARD / "results", tmp_path / "results")
+    if (LEADERBOARD / "designed" / "results").is_dir():  # the protocol comparison reads it
+        shutil.copytree(LEADERBOARD / "designed" / "results", tmp_path / "designed" / "results")
     text = generate(tmp_path)
     assert text == (LEADERBOARD / "README.md").read_text()
     for png in (tmp_path / "plots").iterdir():
@@ -34,17 +36,23 @@ def test_beats_zero_counts_seeds_on_the_same_sessions():
     assert _beats_baseline([cell(0, 0.5)], []) == "–"
 
 
-def test_compare_pairs_two_result_folders_by_seed(tmp_path):
+def _write_cell(root, seed, rec, error=None, vs_imu=None):
     import json as _json
 
+    d = root / "s" / "a2" / "weld" / "interfoot-sensor"
+    d.mkdir(parents=True, exist_ok=True)
+    cell = {"cell": {"suite": "s", "mode": "weld", "seed": seed, "calibrator": "interfoot", "variant": "sensor"},
+            "robot": "a2", "injected": {"score": {"recovery": {"rms_error_deg": rec, "vs_imu_vertical": {
+                "rms_error_deg": vs_imu if vs_imu is not None else (rec or 0) / 2}}}}}
+    if error:
+        cell = {"cell": cell["cell"], "robot": "a2", "error": error}
+    (d / f"seed{seed:02d}.json").write_text(_json.dumps(cell))
+
+
+def test_compare_pairs_two_result_folders_by_seed(tmp_path):
     from legcal_bench.benchmark.leaderboard import compare
 
-    def write(root, seed, rec):
-        d = root / "s" / "a2" / "weld" / "interfoot-sensor"
-        d.mkdir(parents=True, exist_ok=True)
-        cell = {"cell": {"suite": "s", "mode": "weld", "seed": seed, "calibrator": "interfoot", "variant": "sensor"},
-                "robot": "a2", "injected": {"score": {"recovery": {"rms_error_deg": rec}}}}
-        (d / f"seed{seed:02d}.json").write_text(_json.dumps(cell))
+    write = _write_cell
 
     for seed, rec in ((0, 0.1), (1, 0.3), (2, 0.2)):
         write(tmp_path / "a", seed, rec)
@@ -53,3 +61,17 @@ def test_compare_pairs_two_result_folders_by_seed(tmp_path):
     [row] = compare(tmp_path / "a", tmp_path / "b", "a2", "weld")
     assert row["seeds"] == [0, 1] and row["a_lower"] == 1
     assert row["a_mean"] == pytest.approx(0.2) and row["b_mean"] == pytest.approx(0.2)
+
+
+def test_the_leaderboard_puts_a_designed_protocol_beside_the_default_stances(tmp_path):
+    from legcal_bench.benchmark.leaderboard import DESIGNED, _protocol_comparison
+
+    for seed, rec in ((0, 0.10), (1, 0.30), (2, 0.20)):
+        _write_cell(tmp_path / "results", seed, rec)
+    for seed, rec in ((0, 0.05), (1, 0.40)):
+        _write_cell(tmp_path / DESIGNED / "results", seed, rec)
+    _write_cell(tmp_path / DESIGNED / "results", 2, None, error="HoldError: segment stance_D1 ...")
+    rows = [r for r in _protocol_comparison(tmp_path) if r.startswith("| a2 |")]
+    # Seeds 0 and 1 pair up: default 0.20 -> designed 0.225 mean, lower in 1 of 2; seed 2 failed.
+    assert rows == ["| a2 | interfoot-sensor | 2 | 0.200 → 0.225 | 1/2 | 0.1000 → 0.1125 | 1/2 | 1 |"]
+    assert _protocol_comparison(tmp_path / "nothing") == []

@@ -129,6 +129,8 @@ def test_reward_is_the_information_gain_of_each_frame():
     rewards = [s[1] for s in steps]
     assert np.isfinite(rewards).all() and sum(rewards) > 20  # varied postures add information
     assert np.isclose(sum(rewards), steps[-1][4]["log_det_information"] - info["log_det_information"])
+    # The running value is the log-determinant of the information gathered (ε = 1).
+    assert np.isclose(steps[-1][4]["log_det_information"], np.linalg.slogdet(env.information_matrix + np.eye(12))[1])
     # Repeating the same posture adds almost nothing.
     still = [env.step(traj[-1])[1] for _ in range(20)]
     assert max(still[5:]) < 0.05 * max(rewards)

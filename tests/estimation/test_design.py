@@ -123,3 +123,20 @@ def test_a_protocol_file_round_trips_and_collects(tmp_path):
         (tmp_path / "bad.yaml").write_text(bad)
         with pytest.raises(ConfigError, match=message):
             load_protocol(tmp_path / "bad.yaml")
+
+
+def test_excite_learns_on_the_env_reward_and_reports_the_three_motions(tmp_path, capsys):
+    import json
+
+    out = tmp_path / "excite.json"
+    assert main(["excite", "--robot", "a2", "--frames", "150", "--iterations", "2", "--population", "3",
+                 "--elite", "1", "--out", str(out), "--json"]) == 0
+    d = json.loads(out.read_text())
+    assert json.loads(capsys.readouterr().out)["learned"] == d["learned"]
+    # Motion gathers information that standing still does not; the learned motion is
+    # the best held episode, never worse than the protocol's it starts from.
+    assert d["protocol"]["episode_return"] > d["still"]["episode_return"]
+    assert d["learned"]["held"] and d["learned"]["episode_return"] >= d["protocol"]["episode_return"]
+    assert d["still"]["factors"] == [0.0] * 6 and len(d["history"]) == 2 and "commit" in d["code"]
+    assert main(["excite", "--robot", "a2", "--population", "2", "--elite", "2"]) == 2
+    assert "--elite 2" in capsys.readouterr().err
