@@ -185,7 +185,7 @@ def cmd_design(a: argparse.Namespace) -> int:
           f"stances fit the robot (predicted from the kinematics, {a.sensors} sensor noise)")
     if screen is not None:
         held = sum(r["held"] for r in d["screened"].values())
-        print(f"  hold screen ({' and '.join(screen.modes)}, {len(screen.seeds)} seeds, hold limits x {screen.margin:g}): "
+        print(f"  hold screen ({' and '.join(screen.modes)}, {len(screen.cases)} cases, hold limits x {screen.margin:g}): "
               f"{held} of {len(d['screened'])} screened stances held; the default stances: "
               + ", ".join(f"{n} {'held' if r['held'] else 'failed'}" for n, r in d["default_screen"].items()))
     for name in ("default", "designed"):
@@ -315,10 +315,11 @@ def add_commands(sub) -> None:
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
-    de.add_argument("--margin", type=float, default=0.8, help="hold screen: the fraction of the hold check's limits "
-                                                              "a chosen stance must stay within (default 0.8)")
-    de.add_argument("--screen-seeds", type=int, default=4, help="hold screen: seeds per mode (placement jitter, "
-                                                                 "motion phases, factory offsets; default 4)")
+    de.add_argument("--margin", type=float, default=0.75, help="hold screen: the fraction of the hold check's limits "
+                                                               "a chosen stance must stay within (default 0.75)")
+    de.add_argument("--screen-seeds", type=int, default=8, help="hold screen: seeds per mode (placement jitter, "
+                                                                 "motion phases, factory offsets; default 8), plus "
+                                                                 "two cases with the factory offsets at their bound")
     de.add_argument("--no-screen", action="store_true", help="skip the hold screen (kinematics only; the collected "
                                                              "protocol may then fail the hold check)")
     de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "
