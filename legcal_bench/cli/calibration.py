@@ -170,10 +170,8 @@ def cmd_design(a: argparse.Namespace) -> int:
         from legcal_bench.benchmark.plan import NATIVE
         from legcal_bench.protocol.screen import HoldScreen
 
-        if a.screen_seeds < 1:
-            raise ConfigError(f"--screen-seeds {a.screen_seeds}: use at least 1 (or --no-screen)")
-        screen = HoldScreen(kin.legmap, NATIVE, seeds=tuple(range(a.screen_seeds)), margin=a.margin,
-                            duration_s=frames / a.count / 50)
+        screen = HoldScreen(kin.legmap, NATIVE, contact_seeds=a.contact_seeds, weld_seeds=a.weld_seeds,
+                            margin=a.margin, duration_s=frames / a.count / 50)
     d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
                sensors=a.sensors, ranges=a.ranges, screen=screen, progress=not a.json)
     if a.json:
@@ -185,7 +183,7 @@ def cmd_design(a: argparse.Namespace) -> int:
           f"stances fit the robot (predicted from the kinematics, {a.sensors} sensor noise)")
     if screen is not None:
         held = sum(r["held"] for r in d["screened"].values())
-        print(f"  hold screen ({' and '.join(screen.modes)}, {len(screen.cases)} cases, hold limits x {screen.margin:g}): "
+        print(f"  hold screen ({screen.describe()}): "
               f"{held} of {len(d['screened'])} screened stances held; the default stances: "
               + ", ".join(f"{n} {'held' if r['held'] else 'failed'}" for n, r in d["default_screen"].items()))
     for name in ("default", "designed"):
@@ -206,7 +204,8 @@ def cmd_design(a: argparse.Namespace) -> int:
             "made_by": f"legcal-bench design --robot {a.robot} --count {a.count} --frames {a.frames} "
                        f"--candidates {a.candidates} "
                        f"--ranges {a.ranges} --seed {a.seed}"
-                       + (" --no-screen" if a.no_screen else f" --margin {a.margin:g} --screen-seeds {a.screen_seeds}"),
+                       + (" --no-screen" if a.no_screen else
+                          f" --margin {a.margin:g} --contact-seeds {a.contact_seeds} --weld-seeds {a.weld_seeds}"),
             "code": describe(code_version()),
             "predicted": {"default": d["default"], "designed": d["designed"]},
             "hold_screen": {st.name: d["screened"].get(st.name) for st in d["designed_stances"]}})
@@ -315,11 +314,13 @@ def add_commands(sub) -> None:
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
-    de.add_argument("--margin", type=float, default=0.75, help="hold screen: the fraction of the hold check's limits "
-                                                               "a chosen stance must stay within (default 0.75)")
-    de.add_argument("--screen-seeds", type=int, default=8, help="hold screen: seeds per mode (placement jitter, "
-                                                                 "motion phases, factory offsets; default 8), plus "
-                                                                 "two cases with the factory offsets at their bound")
+    de.add_argument("--margin", type=float, default=0.75, help="hold screen, weld: the fraction of the pelvis hold "
+                                                               "limit a chosen stance must stay within (default 0.75)")
+    de.add_argument("--contact-seeds", type=int, default=4, help="hold screen: contact-mode seeds, at the hold limits "
+                                                                  "(default 4; 0 skips contact)")
+    de.add_argument("--weld-seeds", type=int, default=8, help="hold screen: weld-mode seeds (placement jitter, motion "
+                                                               "phases, factory offsets; default 8), plus two cases "
+                                                               "with the factory offsets at their bound")
     de.add_argument("--no-screen", action="store_true", help="skip the hold screen (kinematics only; the collected "
                                                              "protocol may then fail the hold check)")
     de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "

@@ -67,11 +67,17 @@ def test_exchange_repairs_a_greedy_choice():
 def test_hold_screen_passes_stance_one_and_fails_a_motion_the_robot_cannot_hold():
     from dataclasses import replace
 
+    import pytest
+
     from legcal_bench.protocol.screen import HoldScreen
 
-    screen = HoldScreen(load_robot("a2"), "random:1.2", seeds=(0,), duration_s=4.0)
+    screen = HoldScreen(load_robot("a2"), "random:1.2", contact_seeds=1, weld_seeds=1, duration_s=4.0)
     ok = screen(STANCES["I"])
-    assert ok.held and set(ok.reports) == {"weld", "contact"} and ok.reports["weld"].pelvis_limit_m < 0.05 * 1.04
+    assert ok.held and set(ok.reports) == {"weld", "contact"} and len(screen.cases["weld"]) == 3
+    # Weld holds the pelvis within 0.75 of its limit (5 % of the leg length); contact at the limit.
+    L = screen.sims["weld", 0].true_kin.dims.leg_length
+    assert ok.reports["weld"].pelvis_limit_m == pytest.approx(0.75 * 0.05 * L)
+    assert ok.reports["contact"].pelvis_limit_m == pytest.approx(0.05 * L)
     # Stance I's motion five times over, in a deep squat: the robot tips over in contact mode.
     wild = replace(STANCES["I"], name="wild", depth=0.2, amplitude=tuple(5 * a for a in STANCES["I"].amplitude))
     bad = screen(wild)
@@ -79,8 +85,8 @@ def test_hold_screen_passes_stance_one_and_fails_a_motion_the_robot_cannot_hold(
 
 
 def test_design_command_reports_default_and_designed(capsys):
-    assert main(["design", "--robot", "a2", "--candidates", "12", "--count", "2", "--screen-seeds", "1",
-                 "--json"]) == 0
+    assert main(["design", "--robot", "a2", "--candidates", "12", "--count", "2", "--contact-seeds", "1",
+                 "--weld-seeds", "1", "--json"]) == 0
     import json
 
     d = json.loads(capsys.readouterr().out)
