@@ -14,7 +14,8 @@ from legcal_bench.errors import OffsetSpecError
 from legcal_bench.paper import A2_BASE_DEG, A2_PLATFORM_ORDER, A3_BASE_DEG, A3_PLATFORM_ORDER, INJECTION_RAD
 from legcal_bench.robots.legmap import LegMap
 
-PRESETS_HELP = "none | paper | paper-base | random:<deg> | twelve comma-separated radians (leg-map order)"
+PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | twelve comma-separated radians "
+                "(leg-map order)")
 
 
 def paper_injection(legmap: LegMap) -> np.ndarray:
@@ -56,6 +57,15 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
         return paper_injection(legmap)
     if s == "paper-base":
         return paper_base(legmap)
+    if s.startswith("paper@"):
+        # The signs of the paper's injection by role, `deg` on every joint (issue #13's "paper@3").
+        try:
+            deg = float(s.split("@", 1)[1])
+        except ValueError:
+            raise OffsetSpecError(f"offsets {spec!r}: write paper@<deg>, e.g. paper@3") from None
+        if not 0 <= deg <= 10:
+            raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+        return np.sign(paper_injection(legmap)) * np.deg2rad(deg)
     if s.startswith("random:"):
         try:
             deg = float(s.split(":", 1)[1])
