@@ -160,3 +160,17 @@ def test_an_onnx_model_of_the_wrong_size_is_named(tmp_path):
     export_all(tiny_net(n_act=10), tmp_path)
     with pytest.raises(ConfigError, match="outputs 10 values; the spec's joints need 12"):
         PolicyRunner(load_policy_spec(write_spec(tmp_path)), A3)
+
+
+def test_paper_at_deg_has_the_papers_signs_by_role_and_one_magnitude():
+    from legcal_bench.errors import OffsetSpecError
+    from legcal_bench.sim.offsets import paper_injection, resolve_offsets
+
+    for robot in ("a2", "a3"):
+        lm = load_robot(robot)
+        dq = resolve_offsets("paper@3", lm)
+        assert np.allclose(np.abs(dq), np.deg2rad(3)) and (np.sign(dq) == np.sign(paper_injection(lm))).all()
+        signs = dict(zip(lm.joint_roles, np.sign(dq)))
+        assert signs == {"hip_pitch": 1, "hip_roll": 1, "hip_yaw": -1, "knee": -1, "ankle_pitch": 1, "ankle_roll": -1}
+    with pytest.raises(OffsetSpecError, match="paper@<deg>"):
+        resolve_offsets("paper@x", A3)
