@@ -148,10 +148,7 @@ class WalkingEnv(MujocoEnv):
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ConfigError(f"unknown reset options {unknown}; known: {', '.join(RESET_OPTIONS)}")
+        options = self._reset_options(options, RESET_OPTIONS)
         if "offsets" in options:
             self.offsets = resolve_offsets(options["offsets"], self.legmap, np.random.default_rng(self._offset_seed))
         if "correction" in options:

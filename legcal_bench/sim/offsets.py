@@ -38,6 +38,17 @@ def paper_base(legmap: LegMap) -> np.ndarray:
     return out
 
 
+def _degrees(spec: str, prefix: str, example: str) -> float:
+    """The <deg> of `prefix<deg>`, within [0, 10]."""
+    try:
+        deg = float(spec.strip()[len(prefix):])
+    except ValueError:
+        raise OffsetSpecError(f"offsets {spec!r}: write {prefix}<deg>, e.g. {prefix}{example}") from None
+    if not 0 <= deg <= 10:
+        raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+    return deg
+
+
 def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
                     rng: np.random.Generator | None = None) -> np.ndarray:
     """The 12-vector of offsets (rad) for `spec`; `random:<deg>` draws from `rng`
@@ -58,21 +69,10 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
     if s == "paper-base":
         return paper_base(legmap)
     if s.startswith("paper@"):
-        # The signs of the paper's injection by role, `deg` on every joint (issue #13's "paper@3").
-        try:
-            deg = float(s.split("@", 1)[1])
-        except ValueError:
-            raise OffsetSpecError(f"offsets {spec!r}: write paper@<deg>, e.g. paper@3") from None
-        if not 0 <= deg <= 10:
-            raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
-        return np.sign(paper_injection(legmap)) * np.deg2rad(deg)
+        # The signs of the paper's injection by role, <deg> on every joint (issue #13's "paper@3").
+        return np.sign(paper_injection(legmap)) * np.deg2rad(_degrees(spec, "paper@", "3"))
     if s.startswith("random:"):
-        try:
-            deg = float(s.split(":", 1)[1])
-        except ValueError:
-            raise OffsetSpecError(f"offsets {spec!r}: write random:<deg>, e.g. random:1.5") from None
-        if not 0 <= deg <= 10:
-            raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+        deg = _degrees(spec, "random:", "1.5")
         if rng is None:
             raise OffsetSpecError("offsets random:<deg> needs a seeded generator")
         return rng.uniform(-1, 1, 12) * np.deg2rad(deg)
