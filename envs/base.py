@@ -34,6 +34,15 @@ class MujocoEnv(gym.Env, ABC):
         self.metadata = {**type(self).metadata, "render_fps": int(round(1.0 / self.dt))}
         self._renderer: mujoco.Renderer | None = None
 
+    @staticmethod
+    def _reset_options(options: dict | None, known: tuple[str, ...]) -> dict:
+        """`options` as a dict; ConfigError naming unknown keys."""
+        options = dict(options or {})
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise ConfigError(f"unknown reset options {unknown}; known: {', '.join(known)}")
+        return options
+
     @property
     def dt(self) -> float:
         """Duration of one env step (s)."""

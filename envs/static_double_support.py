@@ -131,10 +131,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
     # ------------------------------------------------------------------ API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = sorted(set(options) - set(RESET_OPTIONS))
-        if unknown:
-            raise ConfigError(f"unknown reset options {unknown}; known: {', '.join(RESET_OPTIONS)}")
+        options = self._reset_options(options, RESET_OPTIONS)
         name = options.get("stance", "I")
         if name not in ALL_STANCES:
             raise ConfigError(f"reset option stance={name!r}: use one of {list(ALL_STANCES)}")

@@ -20,8 +20,10 @@ LAYERS = [
     ("protocol", ("legcal_bench.protocol",)),
     ("estimation", ("legcal_bench.estimation",)),
     ("calibrators", ("legcal_bench.calibrators",)),
-    ("envs", ("legcal_bench.envs",)),
+    # A policy is observation -> action (spec, network, runner): the walking env takes
+    # its spec for the servos; rollouts live in evaluation.
     ("policies", ("legcal_bench.policies",)),
+    ("envs", ("legcal_bench.envs",)),
     ("evaluation", ("legcal_bench.evaluation",)),
     ("benchmark", ("legcal_bench.benchmark",)),
     ("reports", ("legcal_bench.reports",)),

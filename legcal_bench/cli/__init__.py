@@ -13,10 +13,10 @@ import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from legcal_bench.cli import benchmark, calibration, data, reports, robots  # noqa: E402
+from legcal_bench.cli import benchmark, calibration, data, reports, robots, walking  # noqa: E402
 from legcal_bench.errors import LegcalError  # noqa: E402
 
-GROUPS = (data, robots, calibration, benchmark, reports)
+GROUPS = (data, robots, calibration, walking, benchmark, reports)
 
 
 def build_parser() -> argparse.ArgumentParser:

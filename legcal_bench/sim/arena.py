@@ -10,20 +10,24 @@ FLOOR_SOLREF = (0.004, 1.0)
 FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 
 
-def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True) -> None:
+def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,
+              friction: tuple = FLOOR_FRICTION, solref: tuple = FLOOR_SOLREF, solimp: tuple = FLOOR_SOLIMP,
+              condim: int | None = None) -> None:
     """A light and a checkered plane at z = 0. With `contact`, the floor collides;
     `static_friction` (for standing still) makes friction behave as static: soft
     friction lets loaded soles creep by millimetres, so an elliptic cone with a high
-    impedance ratio and a no-slip pass are used. Without contact, every contact is
-    disabled (nothing else in a static scene needs one)."""
+    impedance ratio and a no-slip pass are used, with torsional and rolling friction
+    (condim 6). Without it (walking) the floor takes the given contact parameters and
+    sliding friction only (condim 3). Without contact, every contact is disabled
+    (nothing else in a static scene needs one)."""
     m.worldbody.add("light", pos=[0, -1, 3], dir=[0, 0.3, -1], directional=True, diffuse=[0.7, 0.7, 0.7])
     tex = m.asset.add("texture", name="legcal_grid", type="2d", builtin="checker", width=256, height=256,
                       rgb1=[0.82, 0.84, 0.86], rgb2=[0.72, 0.74, 0.78])
     mat = m.asset.add("material", name="legcal_floor", texture=tex, texrepeat=[8, 8], texuniform=True)
     collide = 1 if contact else 0
-    m.worldbody.add("geom", name="legcal_floor", type="plane", size=[5, 5, 0.1], material=mat,
-                    contype=collide, conaffinity=collide, friction=list(FLOOR_FRICTION), condim=6,
-                    solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
+    m.worldbody.add("geom", name="legcal_floor", type="plane", size=[5, 5, 0.1] if static_friction else [30, 30, 0.1], material=mat,
+                    contype=collide, conaffinity=collide, friction=list(friction),
+                    condim=condim or (6 if static_friction else 3), solref=list(solref), solimp=list(solimp))
     if contact and static_friction:
         m.option.cone = "elliptic"
         m.option.impratio = 10

@@ -14,7 +14,8 @@ from legcal_bench.errors import OffsetSpecError
 from legcal_bench.paper import A2_BASE_DEG, A2_PLATFORM_ORDER, A3_BASE_DEG, A3_PLATFORM_ORDER, INJECTION_RAD
 from legcal_bench.robots.legmap import LegMap
 
-PRESETS_HELP = "none | paper | paper-base | random:<deg> | twelve comma-separated radians (leg-map order)"
+PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | twelve comma-separated radians "
+                "(leg-map order)")
 
 
 def paper_injection(legmap: LegMap) -> np.ndarray:
@@ -37,6 +38,17 @@ def paper_base(legmap: LegMap) -> np.ndarray:
     return out
 
 
+def _degrees(spec: str, prefix: str, example: str) -> float:
+    """The <deg> of `prefix<deg>`, within [0, 10]."""
+    try:
+        deg = float(spec.strip()[len(prefix):])
+    except ValueError:
+        raise OffsetSpecError(f"offsets {spec!r}: write {prefix}<deg>, e.g. {prefix}{example}") from None
+    if not 0 <= deg <= 10:
+        raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+    return deg
+
+
 def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
                     rng: np.random.Generator | None = None) -> np.ndarray:
     """The 12-vector of offsets (rad) for `spec`; `random:<deg>` draws from `rng`
@@ -56,13 +68,11 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
         return paper_injection(legmap)
     if s == "paper-base":
         return paper_base(legmap)
+    if s.startswith("paper@"):
+        # The signs of the paper's injection by role, <deg> on every joint (issue #13's "paper@3").
+        return np.sign(paper_injection(legmap)) * np.deg2rad(_degrees(spec, "paper@", "3"))
     if s.startswith("random:"):
-        try:
-            deg = float(s.split(":", 1)[1])
-        except ValueError:
-            raise OffsetSpecError(f"offsets {spec!r}: write random:<deg>, e.g. random:1.5") from None
-        if not 0 <= deg <= 10:
-            raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+        deg = _degrees(spec, "random:", "1.5")
         if rng is None:
             raise OffsetSpecError("offsets random:<deg> needs a seeded generator")
         return rng.uniform(-1, 1, 12) * np.deg2rad(deg)

@@ -24,7 +24,7 @@ from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
-MODES = ("kinematic", "weld", "contact")
+MODES = ("kinematic", "weld", "contact")  # the static floors; "walking" is `legcal_bench.sim.walking`'s
 # Servo-held feet: MuJoCo's default weld lets them drift by centimetres.
 WELD_SOLREF = (0.004, 1.0)
 WELD_SOLIMP = (0.99, 0.999, 0.001, 0.5, 2.0)
@@ -112,10 +112,17 @@ def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, e
 def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
     if mode not in MODES:
         raise ConfigError(f"mode {mode!r}: use one of {MODES}")
-    where = str(legmap.source or legmap.name)
     m = mjcf.from_path(str(legmap.mjcf))
     m.option.timestep = physics_dt
     m.option.integrator = "implicitfast"
+    return compose_robot(m, legmap, mode)
+
+
+def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | None = None) -> Scene:
+    """The scene around robot model `m` (its options already set): the arena's floor
+    (`mode` "walking": colliding, with `floor`'s contact parameters), the leg map's
+    frames and sensors, held joints, weld anchors; compiled and indexed."""
+    where = str(legmap.source or legmap.name)
     m.option.gravity = (0, 0, -9.81)
     vis_global = getattr(m.visual, "global")
     vis_global.offwidth, vis_global.offheight = 1280, 960
@@ -126,7 +133,10 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
     if free is None:
         free = pelvis.add("freejoint", name="legcal_root")
     # Only the floor's contacts matter here: in kinematic and weld modes, none at all.
-    add_floor(m, contact=mode == "contact")
+    if mode == "walking":
+        add_floor(m, contact=True, static_friction=False, **(floor or {}))
+    else:
+        add_floor(m, contact=mode == "contact")
 
     sole_site, corner_sites = {}, {}
     for side in SIDES:
@@ -158,7 +168,8 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
 
     model = mujoco.MjModel.from_xml_string(m.to_xml_string(), m.get_assets())
     scene = _index(model, legmap, mode, free.full_identifier, sole_site, corner_sites, imu_site, has_ft, where)
-    set_servo_gains(scene, scene.servo_kp, scene.servo_kd, scene.servo_source)  # the leg map's gains into the model
+    if mode != "walking":  # the leg map's (static) gains into the model; walking servos keep theirs
+        set_servo_gains(scene, scene.servo_kp, scene.servo_kd, scene.servo_source)
     return scene
 
 
@@ -202,7 +213,7 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         a = position_act[k]
         if a < 0 and motor_act[k] < 0:
             raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF")
-        if name in legmap.servo_gains:
+        if name in legmap.servo_gains and mode != "walking":
             kp[k], kd[k] = legmap.servo_gains[name]
             source.append("leg map")
         elif a >= 0:

@@ -1,0 +1,129 @@
+"""Walks: a policy run in the walking env, what it did, and how far two walks differ.
+
+`walk` runs one episode (a policy from its spec, `PolicyRunner`, in `WalkingEnv`) and
+keeps the truth a closed-loop evaluation needs: the pelvis trajectory at the policy
+rate, every foot strike, mean torque and power, and whether and when it fell.
+`deviation` compares a walk with the same seed's nominal one as the paper does: the
+pelvis-trajectory RMS deviation (horizontal distance between the two pelvis positions
+at the same times, over the common duration) and the foot-strike RMS deviation (the
+k-th touchdown of each foot paired, over the common count, horizontal distance).
+"""
+
+from __future__ import annotations
+
+import time as _time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from legcal_bench.evaluation.metrics import rms
+from legcal_bench.robots.legmap import SIDES
+
+
+@dataclass
+class Walk:
+    seed: int
+    seconds: float  # asked for
+    offsets_rad: list[float]
+    correction_rad: list[float]
+    time: np.ndarray  # (n,) s
+    pelvis: np.ndarray  # (n, 7) [x y z qw qx qy qz]
+    strikes: dict  # side -> {"time": [...], "position": [[x, y, z], ...]}
+    torque_mean: float  # N m, mean |tau| over joints and steps
+    power_mean: float  # W, mean sum |tau qdot|
+    fallen_at: float | None
+    wall_s: float
+    privileged: list[str] = field(default_factory=list)  # observation terms read from the simulator
+
+    @property
+    def upright(self) -> bool:
+        return self.fallen_at is None
+
+    def summary(self) -> dict:
+        d = {k: v for k, v in asdict(self).items() if k not in ("time", "pelvis", "strikes")}
+        d.update(upright=self.upright, duration_s=float(self.time[-1]) if len(self.time) else 0.0,
+                 distance_m=float(np.linalg.norm(self.pelvis[-1, :2] - self.pelvis[0, :2])) if len(self.pelvis) else 0.0,
+                 strike_counts={s: len(self.strikes[s]["time"]) for s in SIDES})
+        return d
+
+
+def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on_step=None) -> Walk:
+    """One episode of `seconds` (stopping early if the robot falls). `on_step(env)`
+    is called after each step (e.g. to render frames)."""
+    u = env.unwrapped
+    obs, info = env.reset(seed=seed, options=options)
+    runner.reset()
+    n = int(round(seconds / u.dt))
+    t, pelvis = np.empty(n), np.empty((n, 7))
+    torque, power = 0.0, 0.0
+    k = 0
+    t0 = _time.perf_counter()
+    for k in range(n):
+        obs, _, terminated, _, info = env.step(runner.act(obs, info, u.sim.time))
+        t[k], pelvis[k] = info["time"], info["pelvis_pose"]
+        torque += float(np.abs(info["torque"]).mean())
+        power += info["power"]
+        if on_step is not None:
+            on_step(env)
+        if terminated:
+            break
+    wall = _time.perf_counter() - t0
+    steps = k + 1
+    return Walk(seed, seconds, u.offsets.tolist(), u.correction.tolist(), t[:steps], pelvis[:steps],
+                u.sim.strikes.to_dict(), torque / steps, power / steps, info["fallen_at"], wall,
+                runner.spec.privileged)
+
+
+def deviation(a: Walk, nominal: Walk) -> dict:
+    """Pelvis-trajectory and foot-strike RMS deviation (mm) of `a` from `nominal`."""
+    n = min(len(a.time), len(nominal.time))
+    pelvis = rms(np.linalg.norm(a.pelvis[:n, :2] - nominal.pelvis[:n, :2], axis=1)) if n else np.nan
+    d = []
+    for s in SIDES:
+        pa, pb = np.asarray(a.strikes[s]["position"]), np.asarray(nominal.strikes[s]["position"])
+        m = min(len(pa), len(pb))
+        if m:
+            d.extend(np.linalg.norm(pa[:m, :2] - pb[:m, :2], axis=1))
+    return {"pelvis_rms_mm": 1e3 * pelvis, "foot_strike_rms_mm": 1e3 * rms(d) if d else np.nan,
+            "strikes_paired": len(d)}
+
+
+PATTERN_SEED_BASE = 20_000  # the random:<deg> pattern of trial s comes from default_rng(PATTERN_SEED_BASE + s)
+
+
+def trial_offsets(spec: str, legmap, seed: int) -> np.ndarray:
+    """The offsets of trial `seed`: a fixed pattern (`paper@3`, 12 radians...) is the
+    same in every trial; `random:<deg>` draws one pattern per trial."""
+    from legcal_bench.sim.offsets import resolve_offsets
+
+    return resolve_offsets(spec, legmap, np.random.default_rng(PATTERN_SEED_BASE + seed))
+
+
+def walk_trials(env, runner, offsets: str, trials: int, seconds: float = 20.0, correction=None, first_seed: int = 0,
+                progress: bool = True) -> dict:
+    """`trials` paired walks: per seed the nominal walk (no offsets) and the walk with
+    `offsets` (with `correction` applied, if given), the same seed driving noise and
+    initial jitter. Returns per-trial summaries and deviations, and the aggregate."""
+    from tqdm import tqdm
+
+    rows = []
+    u = env.unwrapped
+    for seed in tqdm(range(first_seed, first_seed + trials), desc=f"walk {u.legmap.name} {offsets}", unit="trial",
+                     disable=not progress):
+        nominal = walk(env, runner, seconds, seed, {"offsets": np.zeros(12), "correction": None})
+        dq = trial_offsets(offsets, u.legmap, seed)
+        w = walk(env, runner, seconds, seed, {"offsets": dq, "correction": correction})
+        dev = deviation(w, nominal) if w.upright and nominal.upright else {}
+        rows.append({"seed": seed, "nominal": nominal.summary(), "offsets": w.summary(), **dev})
+    up_nom = sum(r["nominal"]["upright"] for r in rows)
+    up = sum(r["offsets"]["upright"] for r in rows)
+    both = [r for r in rows if "pelvis_rms_mm" in r]
+
+    def stat(key):
+        v = np.array([r[key] for r in both], dtype=float)
+        return {"mean": float(np.mean(v)), "std": float(np.std(v))} if len(v) else None
+
+    return {"offsets": offsets, "trials": trials, "seconds": seconds, "upright_nominal": up_nom, "upright": up,
+            "pelvis_rms_mm": stat("pelvis_rms_mm"), "foot_strike_rms_mm": stat("foot_strike_rms_mm"),
+            "wall_s_per_walk": float(np.mean([r[k]["wall_s"] for r in rows for k in ("nominal", "offsets")])),
+            "privileged": runner.spec.privileged, "rows": rows}

@@ -1,0 +1,303 @@
+"""Free-standing walking: the robot on a frictional floor, servos at physics rate
+tracking encoder-space targets, and what its software reads.
+
+The scene is the robot's own MJCF on the arena's walking floor (`legcal_bench.sim.scene`,
+mode "walking"): the leg joints' actuators become position servos with the walking
+gains (PD at physics rate, inside MuJoCo's step), and the walking-only additions of
+`WalkingConfig` (integrator, armature, floor friction) live here, never in the robot
+file, so the static results do not move.
+
+Encoders and corrections, as on a robot: the encoders read q_enc = q_true - dq (+ noise,
+quantized); the software applies a correction dq_hat as q_corr = q_enc + dq_hat before
+both the policy and the servo loop. A servo tracking target u on q_corr drives the true
+joint to u + dq - dq_hat: with no correction the offsets bend the real posture, with the
+true one (dq_hat = dq) they vanish. The servo loop reads the encoders without their
+noise (a motor driver's loop at physics rate; the noise is 1e-4 rad against kp of
+~100 N m/rad, 0.01 N m).
+
+What the software sees each control step (`observe`): the corrected encoder angles,
+joint velocities (the true ones plus the noise of a difference of two encoder readings
+one physics step apart, as a motor driver differentiates), the gyro and accelerometer (`SimSensors`: noise, bias and the
+realized mounting tilt), the gravity direction from an orientation filter on them
+(`GravityFilter`, in the base frame through the nominal IMU mount: a mounting tilt is
+seen as a tilt of the robot), and the ankle force/torque where the leg map has them.
+
+Ground truth (`truth`): pelvis pose, joint torques and mechanical power, each foot's
+vertical contact load, foot strikes (a touchdown is the load of a foot rising above
+`TOUCHDOWN_FRACTION` of the robot's weight after it was below `LIFTOFF_FRACTION`; its
+position is the sole frame's at that step) and falls (`FALL_HEIGHT_FRACTION`,
+`FALL_TILT_RAD`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+import pinocchio as pin
+
+from dm_control import mjcf
+
+from legcal_bench.errors import ConfigError
+from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.sim.orientation import GravityFilter
+from legcal_bench.sim.scene import Scene, compose_robot
+from legcal_bench.sim.sensors import SimSensors
+
+FALL_HEIGHT_FRACTION = 0.6  # fallen: the pelvis below this fraction of its starting height ...
+FALL_TILT_RAD = 1.0  # ... or its z axis more than this from vertical (57 deg)
+TOUCHDOWN_FRACTION = 0.15  # of the robot's weight on a foot: touchdown (after liftoff)
+LIFTOFF_FRACTION = 0.03  # of the robot's weight: the foot is off the floor
+
+
+@dataclass(frozen=True)
+class WalkingConfig:
+    """How the robot walks: servo gains and pose (leg-map order), rates, and the
+    walking-only model additions."""
+
+    kp: tuple[float, ...]  # N m/rad
+    kd: tuple[float, ...]  # N m s/rad
+    default_q: tuple[float, ...]  # rad, the pose the robot starts in (encoder space)
+    physics_dt: float = 0.002
+    decimation: int = 10  # physics steps per control step
+    torque_limit: tuple[float, ...] | None = None  # N m per joint; None: the MJCF's
+    integrator: str | None = None  # None: the MJCF's own
+    armature: float | None = None  # kg m^2 on leg joints whose MJCF gives none
+    # The walking floor's contact: MuJoCo's defaults (the static floor is stiffer and
+    # has torsional friction, for soles that must not creep).
+    floor_friction: tuple[float, float, float] = (1.0, 0.005, 0.0001)
+    floor_solref: tuple[float, float] = (0.02, 1.0)
+    floor_solimp: tuple[float, ...] = (0.9, 0.95, 0.001, 0.5, 2.0)
+    jitter_q_rad: float = 0.01  # initial joint angles, uniform +-
+    jitter_yaw_rad: float = 0.02  # initial heading, uniform +-
+
+    def __post_init__(self):
+        for name in ("kp", "kd", "default_q"):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.shape != (12,) or not np.isfinite(v).all():
+                raise ConfigError(f"walking config: '{name}' must be 12 finite numbers (leg-map order), got {v.shape}")
+        if self.physics_dt <= 0 or self.decimation < 1:
+            raise ConfigError("walking config: physics_dt must be > 0 and decimation >= 1")
+
+    @property
+    def control_dt(self) -> float:
+        return self.physics_dt * self.decimation
+
+
+def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
+    """The robot's MJCF on the walking floor, its leg actuators replaced by position
+    servos (gain kp, bias -kp q - kd qdot: PD at physics rate inside MuJoCo's step) with
+    the robot's torque limits (or `cfg.torque_limit`), and `cfg`'s model additions."""
+    m = mjcf.from_path(str(legmap.mjcf))
+    m.option.timestep = cfg.physics_dt
+    if cfg.integrator is not None:
+        m.option.integrator = cfg.integrator
+    limits = np.full(12, np.inf)
+    leg = set(legmap.joint_names)
+    for act in list(m.actuator.all_children()):
+        joint = getattr(act, "joint", None)
+        name = joint if isinstance(joint, str) else getattr(joint, "name", None)
+        if name in leg:
+            rng = act.forcerange if act.forcelimited in (True, "true") else (
+                act.ctrlrange * (act.gear[0] if act.gear is not None else 1.0)
+                if act.tag == "motor" and act.ctrllimited in (True, "true") and act.ctrlrange is not None else None)
+            if rng is not None:
+                limits[legmap.joint_names.index(name)] = float(np.max(np.abs(rng)))
+            act.remove()
+    if cfg.torque_limit is not None:
+        limits = np.asarray(cfg.torque_limit, dtype=float)
+    for k, name in enumerate(legmap.joint_names):
+        extra = {} if not np.isfinite(limits[k]) else dict(forcelimited=True, forcerange=[-limits[k], limits[k]])
+        m.actuator.add("general", name=f"legcal_servo_{name}", joint=name, gaintype="fixed", biastype="affine",
+                       gainprm=[cfg.kp[k]], biasprm=[0.0, -cfg.kp[k], -cfg.kd[k]], **extra)
+    scene = compose_robot(m, legmap, "walking", floor=dict(friction=cfg.floor_friction, solref=cfg.floor_solref,
+                                                           solimp=cfg.floor_solimp))
+    if cfg.armature is not None:
+        dofs = scene.dof_adr[scene.model.dof_armature[scene.dof_adr] == 0]
+        scene.model.dof_armature[dofs] = cfg.armature
+    return scene
+
+
+@dataclass
+class FootStrikes:
+    """Touchdowns per foot: times (s) and sole positions (m, world)."""
+
+    time: dict = field(default_factory=lambda: {s: [] for s in SIDES})
+    position: dict = field(default_factory=lambda: {s: [] for s in SIDES})
+
+    def to_dict(self) -> dict:
+        return {s: {"time": list(self.time[s]), "position": [list(p) for p in self.position[s]]} for s in SIDES}
+
+
+class WalkingSim:
+    """One robot walking freely; `reset` stands it on the floor, `step` applies one
+    control step's targets (encoder space, leg-map order)."""
+
+    def __init__(self, legmap: LegMap, config: WalkingConfig, sensor: SimSensors):
+        self.legmap, self.config, self.sensor = legmap, config, sensor
+        self.scene = build_walking_scene(legmap, config)
+        self.model = self.scene.model
+        self.data = mujoco.MjData(self.model)
+        self.kin = LegKinematics(legmap)  # the nominal IMU mount
+        self.R_BI = self.kin.R_BI  # nominal IMU mount in the base frame
+        self.filter = GravityFilter()
+        sc, m = self.scene, self.model
+        self.weight = float(sum(m.body_mass)) * 9.81
+        self._foot_bodies = {s: self._subtree(m.site_bodyid[sc.sole_site[s]]) for s in SIDES}
+        self._imu_adr = np.r_[sc.sensor_adr["imu_acc"]:sc.sensor_adr["imu_acc"] + 3,
+                              sc.sensor_adr["imu_gyro"]:sc.sensor_adr["imu_gyro"] + 3]
+        self._ft_adr = (np.concatenate([np.r_[sc.sensor_adr[f"{s}_{k}"]:sc.sensor_adr[f"{s}_{k}"] + 3]
+                                        for s in SIDES for k in ("force", "torque")]) if sc.has_ft else None)
+        free = int(np.flatnonzero(m.jnt_qposadr == sc.free_qpos_adr)[0])
+        self._free_dof = int(m.jnt_dofadr[free])
+        self.offsets = np.zeros(12)
+        self.correction = np.zeros(12)
+
+    def _subtree(self, body: int) -> np.ndarray:
+        m = self.model
+        bodies = {body}
+        for b in range(m.nbody):
+            p = b
+            while p > 0 and p not in bodies:
+                p = m.body_parentid[p]
+            if p in bodies:
+                bodies.add(b)
+        return np.isin(m.geom_bodyid, sorted(bodies))
+
+    # ------------------------------------------------------------------ control
+    def reset(self, offsets: np.ndarray, correction: np.ndarray, rng: np.random.Generator) -> None:
+        """Stand the robot on the floor at the default pose (servo targets held), its
+        soles' lowest corner touching the floor, with a small seeded jitter."""
+        sc, m, d, cfg = self.scene, self.model, self.data, self.config
+        self.offsets = np.asarray(offsets, dtype=float).copy()
+        self.correction = np.asarray(correction, dtype=float).copy()
+        mujoco.mj_resetData(m, d)
+        target = np.asarray(cfg.default_q)
+        d.qpos[sc.qpos_adr] = self._true_target(target) + rng.uniform(-1, 1, 12) * cfg.jitter_q_rad
+        yaw = rng.uniform(-1, 1) * cfg.jitter_yaw_rad
+        f = sc.free_qpos_adr
+        d.qpos[f:f + 3] = 0.0
+        d.qpos[f + 3:f + 7] = [np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]
+        mujoco.mj_kinematics(m, d)
+        corners = np.concatenate([sc.corner_sites[s] for s in SIDES])
+        d.qpos[f + 2] = -d.site_xpos[corners, 2].min() + 0.002
+        mujoco.mj_forward(m, d)
+        self._ctrl(target)
+        self.start_height = float(d.qpos[f + 2])
+        self.time = 0.0
+        self.fallen_at: float | None = None
+        self.strikes = FootStrikes()
+        self._airborne = {s: False for s in SIDES}
+        self.loads = self.foot_loads()
+        # The filter has settled on the robot standing still before the run: the
+        # accelerometer's static reading (gravity, through the mount tilt and bias).
+        R_WI = d.site_xmat[sc.imu_site].reshape(3, 3)
+        self.filter.reset(self.sensor.imu(R_WI.T @ np.array([0.0, 0.0, 9.81]), np.zeros(3), rng)[0])
+        self._imu_state = self._imu_kinematics()
+        self._imu_mean = (R_WI.T @ np.array([0.0, 0.0, 9.81]), np.zeros(3))
+
+    def _true_target(self, target: np.ndarray) -> np.ndarray:
+        # q_corr = q_true - dq + dq_hat tracks target  <=>  q_true tracks target + dq - dq_hat.
+        return target + self.offsets - self.correction
+
+    def _ctrl(self, target: np.ndarray) -> None:
+        self.data.ctrl[self.scene.servo[0]] = self._true_target(target)
+
+    def step(self, target: np.ndarray) -> None:
+        """Hold `target` (encoder space, corrected) for one control step."""
+        self._ctrl(np.asarray(target, dtype=float))
+        mujoco.mj_step(self.model, self.data, nstep=self.config.decimation)
+        self.time += self.config.control_dt
+        # The IMU's rate and specific force averaged over the step (a high-rate filter's input).
+        (R0, v0), (R1, v1) = self._imu_state, self._imu_kinematics()
+        T = self.config.control_dt
+        self._imu_mean = (R1.T @ ((v1 - v0) / T + np.array([0.0, 0.0, 9.81])), pin.log3(R0.T @ R1) / T)
+        self._imu_state = (R1, v1)
+        self._events()
+
+    # ----------------------------------------------------------------- sensing
+    def _imu_kinematics(self) -> tuple[np.ndarray, np.ndarray]:
+        """The IMU site's orientation (world) and linear velocity (world)."""
+        v = np.empty(6)
+        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, self.scene.imu_site, v, 0)
+        return self.data.site_xmat[self.scene.imu_site].reshape(3, 3).copy(), v[3:].copy()
+
+    def _true_imu(self) -> tuple[np.ndarray, np.ndarray]:
+        s = self.data.sensordata[self._imu_adr]
+        return s[:3], s[3:]
+
+    def observe(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """What the robot's software reads now (corrected encoders)."""
+        sc, d, sen = self.scene, self.data, self.sensor
+        q_true = d.qpos[sc.qpos_adr]
+        q_enc = sen.encoders(q_true - self.offsets, rng)
+        sigma = np.sqrt(2) * sen.model.encoder_noise_std / self.config.physics_dt
+        dq = d.qvel[sc.dof_adr] + sigma * rng.standard_normal(12)
+        acc, gyro = sen.imu(*self._true_imu(), rng)
+        down_I = self.filter.update(*sen.imu(*self._imu_mean, rng), self.config.control_dt)
+        obs = {"q_enc": q_enc + self.correction, "dq_enc": dq, "imu_acc": acc, "imu_gyro": gyro,
+               "gravity": self.R_BI @ down_I}
+        if self._ft_adr is not None:
+            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng)
+        return obs
+
+    # ------------------------------------------------------------ ground truth
+    def foot_loads(self) -> np.ndarray:
+        """Vertical contact force on each foot (N): left, right."""
+        m, d = self.model, self.data
+        loads = np.zeros(2)
+        f6 = np.zeros(6)
+        for i in range(d.ncon):
+            c = d.contact[i]
+            for k, s in enumerate(SIDES):
+                if self._foot_bodies[s][c.geom1] or self._foot_bodies[s][c.geom2]:
+                    mujoco.mj_contactForce(m, d, i, f6)
+                    loads[k] += abs(f6[0] * c.frame[2])  # normal force times the normal's z
+        return loads
+
+    def _events(self) -> None:
+        self.loads = self.foot_loads()
+        loads = self.loads / self.weight
+        d, sc = self.data, self.scene
+        for k, s in enumerate(SIDES):
+            if loads[k] < LIFTOFF_FRACTION:
+                self._airborne[s] = True
+            elif self._airborne[s] and loads[k] > TOUCHDOWN_FRACTION:
+                self._airborne[s] = False
+                self.strikes.time[s].append(self.time)
+                self.strikes.position[s].append(d.site_xpos[sc.sole_site[s]].tolist())
+        if self.fallen_at is None and self.fallen():
+            self.fallen_at = self.time
+
+    def pelvis_pose(self) -> np.ndarray:
+        """[x y z qw qx qy qz] of the pelvis (world)."""
+        f = self.scene.free_qpos_adr
+        return self.data.qpos[f:f + 7].copy()
+
+    def base_lin_vel(self) -> np.ndarray:
+        """Pelvis linear velocity in its own frame (m/s; the free joint's is in the world)."""
+        f, v = self.scene.free_qpos_adr, self.data.qvel[self._free_dof:self._free_dof + 3]
+        R = np.empty(9)
+        mujoco.mju_quat2Mat(R, self.data.qpos[f + 3:f + 7])
+        return R.reshape(3, 3).T @ v
+
+    def fallen(self) -> bool:
+        f = self.scene.free_qpos_adr
+        w, x, y, _ = self.data.qpos[f + 3:f + 7]
+        cos_tilt = 1 - 2 * (x * x + y * y)  # z axis of the pelvis against vertical
+        return bool(self.data.qpos[f + 2] < FALL_HEIGHT_FRACTION * self.start_height
+                    or cos_tilt < np.cos(FALL_TILT_RAD))
+
+    def torques(self) -> np.ndarray:
+        return self.data.actuator_force[self.scene.servo[0]].copy()
+
+    def power(self) -> float:
+        """Mechanical power of the leg servos (W): sum |tau * qdot|."""
+        return float(np.abs(self.torques() * self.data.qvel[self.scene.dof_adr]).sum())
+
+    def truth(self) -> dict:
+        return {"time": self.time, "pelvis_pose": self.pelvis_pose(), "q_true": self.data.qpos[self.scene.qpos_adr].copy(),
+                "torque": self.torques(), "power": self.power(), "fallen": self.fallen_at is not None,
+                "fallen_at": self.fallen_at, "offsets": self.offsets.copy(), "correction": self.correction.copy()}

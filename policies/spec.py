@@ -1,0 +1,191 @@
+"""A policy spec: everything needed to run a published walking policy on a robot.
+
+A small YAML file (`format: legcal-policy/1`) written by whoever has the policy, in
+the words of its deployment config, never in code:
+
+    format: legcal-policy/1
+    name: my_walker
+    model: {file: policy.pt, format: torchscript}   # torchscript | torch.export | onnx
+    joints: [left_hip_pitch_joint, ...]   # the policy's joint order (names in the leg map)
+    default_q: [...]                      # rad, in the policy's order
+    action: {scale: 0.25, clip: null}     # target = default_q + scale * action
+    pd: {kp: [...], kd: [...], torque_limit: null}   # per joint, the policy's order
+    rates: {physics_hz: 500, control_hz: 50}
+    command: [0.5, 0.0, 0.0]              # vx (m/s), vy (m/s), yaw rate (rad/s)
+    observation:                          # in order; each term's values x scale, then clipped
+      - {term: ang_vel, scale: 0.25}
+      - {term: gravity}
+      - {term: command, scale: [2.0, 2.0, 0.25]}
+      - {term: joint_pos, scale: 1.0}     # minus default_q; optional mask: [joint names]
+      - {term: joint_vel, scale: 0.05}
+      - {term: last_action}
+      - {term: phase, period: 0.8}        # sin, cos of one clock
+
+Relative paths are relative to the spec file. Joints are mapped by name onto the leg
+map (any order); a joint the leg map lacks is refused. The terms (`TERMS`) and what
+each reads are in `legcal_bench.policies.observation`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from legcal_bench.errors import ConfigError
+
+SPEC_FORMAT = "legcal-policy/1"
+MODEL_FORMATS = ("torchscript", "torch.export", "onnx")
+
+
+@dataclass(frozen=True)
+class ObsTerm:
+    term: str
+    scale: tuple[float, ...] = (1.0,)  # one, or one per value
+    clip: float | None = None
+    mask: tuple[str, ...] | None = None  # joint terms: only these joints (names), in the policy's order
+    period: float | None = None  # phase: the clock's period (s)
+    offsets: tuple[float, ...] | None = None  # foot_phase: each foot's phase offset (fraction of a period)
+
+
+@dataclass(frozen=True)
+class PolicySpec:
+    name: str
+    path: Path  # the spec file
+    model_file: Path
+    model_format: str
+    joints: tuple[str, ...]
+    default_q: tuple[float, ...]
+    action_scale: float
+    action_clip: float | None
+    kp: tuple[float, ...]
+    kd: tuple[float, ...]
+    torque_limit: tuple[float, ...] | None
+    physics_hz: float
+    control_hz: float
+    command: tuple[float, float, float]
+    observation: tuple[ObsTerm, ...]
+    notes: dict = field(default_factory=dict)
+
+    @property
+    def decimation(self) -> int:
+        return int(round(self.physics_hz / self.control_hz))
+
+    @property
+    def privileged(self) -> list[str]:
+        """Terms the robot cannot measure, taken from the simulator."""
+        from legcal_bench.policies.observation import TERMS
+
+        return [t.term for t in self.observation if TERMS[t.term].privileged]
+
+
+def _numbers(v, n: int | None, where: str, positive: bool = False) -> tuple[float, ...]:
+    try:
+        if isinstance(v, (bool, str)) or (isinstance(v, list) and any(isinstance(x, (bool, str)) for x in v)):
+            raise ValueError
+        a = np.atleast_1d(np.asarray(v, dtype=float))
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.ndim != 1 or not np.isfinite(a).all() or (n is not None and len(a) != n) or (
+            positive and (a < 0).any()):
+        want = f"{n} finite numbers" if n is not None else "finite numbers"
+        raise ConfigError(f"{where}: must be {want}{' >= 0' if positive else ''}, got {v!r}")
+    return tuple(float(x) for x in a)
+
+
+def load_policy_spec(path: str | Path) -> PolicySpec:
+    """Read and check a spec; ConfigError naming the field and the fix."""
+    import yaml
+
+    from legcal_bench.policies.observation import TERMS
+
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"policy spec {path}: not a readable YAML file ({e})") from None
+    w = f"policy spec {path}"
+    if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
+        raise ConfigError(f"{w}: field 'format' must be {SPEC_FORMAT!r} (see legcal_bench/policies/spec.py)")
+    known = {"format", "name", "model", "joints", "default_q", "action", "pd", "rates", "command", "observation",
+             "notes"}
+    unknown = set(doc) - known
+    if unknown:
+        raise ConfigError(f"{w}: unknown fields {sorted(unknown)}; known: {sorted(known)}")
+    model = doc.get("model")
+    if not isinstance(model, dict) or not isinstance(model.get("file"), str):
+        raise ConfigError(f"{w}: field 'model' must be {{file: <path>, format: {' | '.join(MODEL_FORMATS)}}}")
+    fmt = model.get("format")
+    if fmt not in MODEL_FORMATS:
+        raise ConfigError(f"{w}: model.format {fmt!r}: use one of {MODEL_FORMATS}")
+    model_file = (path.parent / model["file"]).resolve()
+    if not model_file.is_file():
+        raise ConfigError(f"{w}: model.file {model['file']!r}: no such file ({model_file}); paths are relative to "
+                          "the spec")
+    joints = doc.get("joints")
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints) or len(
+            set(joints)) != len(joints):
+        raise ConfigError(f"{w}: field 'joints' must list the policy's joint names, each once, in its order")
+    n = len(joints)
+    default_q = _numbers(doc.get("default_q"), n, f"{w}: default_q (rad, one per joint)")
+    action = doc.get("action", {})
+    if not isinstance(action, dict):
+        raise ConfigError(f"{w}: field 'action' must be {{scale: <number>, clip: <number or null>}}")
+    scale = _numbers(action.get("scale", 1.0), 1, f"{w}: action.scale")[0]
+    clip = None if action.get("clip") is None else _numbers(action["clip"], 1, f"{w}: action.clip", True)[0]
+    pd = doc.get("pd")
+    if not isinstance(pd, dict):
+        raise ConfigError(f"{w}: field 'pd' must be {{kp: [...], kd: [...]}} (N m/rad, N m s/rad, one per joint)")
+    kp = _numbers(pd.get("kp"), n, f"{w}: pd.kp (N m/rad, one per joint)", True)
+    kd = _numbers(pd.get("kd"), n, f"{w}: pd.kd (N m s/rad, one per joint)", True)
+    tl = None if pd.get("torque_limit") is None else _numbers(pd["torque_limit"], n, f"{w}: pd.torque_limit", True)
+    rates = doc.get("rates", {})
+    if not isinstance(rates, dict):
+        raise ConfigError(f"{w}: field 'rates' must be {{physics_hz: ..., control_hz: ...}}")
+    physics_hz = _numbers(rates.get("physics_hz", 500), 1, f"{w}: rates.physics_hz", True)[0]
+    control_hz = _numbers(rates.get("control_hz", 50), 1, f"{w}: rates.control_hz", True)[0]
+    if control_hz <= 0 or physics_hz < control_hz or abs(physics_hz / control_hz - round(physics_hz / control_hz)) > 1e-6:
+        raise ConfigError(f"{w}: rates: physics_hz ({physics_hz:g}) must be a whole multiple of control_hz "
+                          f"({control_hz:g})")
+    command = _numbers(doc.get("command", [0.0, 0.0, 0.0]), 3, f"{w}: command [vx m/s, vy m/s, yaw rate rad/s]")
+    obs = doc.get("observation")
+    if not isinstance(obs, list) or not obs:
+        raise ConfigError(f"{w}: field 'observation' must list the observation terms in order (terms: "
+                          f"{', '.join(TERMS)})")
+    terms = []
+    for i, t in enumerate(obs):
+        wt = f"{w}: observation[{i}]"
+        if not isinstance(t, dict) or t.get("term") not in TERMS:
+            raise ConfigError(f"{wt}: 'term' must be one of {list(TERMS)}, got {t!r}")
+        extra = set(t) - {"term", "scale", "clip", "mask", "period", "offsets"}
+        if extra:
+            raise ConfigError(f"{wt}: unknown keys {sorted(extra)}")
+        mask = t.get("mask")
+        if mask is not None:
+            if not TERMS[t["term"]].per_joint:
+                raise ConfigError(f"{wt}: 'mask' applies to joint terms only ({[k for k, v in TERMS.items() if v.per_joint]})")
+            if not isinstance(mask, list) or not all(m in joints for m in mask):
+                raise ConfigError(f"{wt}: 'mask' must list joint names from 'joints'")
+        period = t.get("period")
+        if TERMS[t["term"]].needs_period:
+            if period is None:
+                raise ConfigError(f"{wt}: term {t['term']!r} needs 'period' (s)")
+            period = _numbers(period, 1, f"{wt}: period (s)", True)[0]
+            if period <= 0:
+                raise ConfigError(f"{wt}: period must be > 0 s")
+        offsets = None
+        if t["term"] == "foot_phase":
+            offsets = _numbers(t.get("offsets", [0.0, 0.5]), None, f"{wt}: offsets (fractions of a period)")
+        terms.append(ObsTerm(t["term"], _numbers(t.get("scale", 1.0), None, f"{wt}: scale"),
+                             None if t.get("clip") is None else _numbers(t["clip"], 1, f"{wt}: clip", True)[0],
+                             tuple(mask) if mask is not None else None, period, offsets))
+    spec = PolicySpec(str(doc.get("name", path.stem)), path, model_file, fmt, tuple(joints), default_q, scale, clip,
+                      kp, kd, tl, physics_hz, control_hz, command, tuple(terms), doc.get("notes") or {})
+    from legcal_bench.policies.observation import observation_size
+
+    for i, t in enumerate(spec.observation):
+        size = observation_size(spec, (t,))
+        if len(t.scale) not in (1, size):
+            raise ConfigError(f"{w}: observation[{i}] ({t.term}): scale has {len(t.scale)} values; give 1 or {size}")
+    return spec
