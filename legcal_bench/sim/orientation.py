@@ -12,8 +12,8 @@ on a robot.
 An IMU's filter runs at its sampling rate (~1 kHz), far above a policy's: the walking
 simulator feeds it the rate and specific force averaged over each control period (what
 a high-rate filter integrates), not one instantaneous sample per period, which aliases
-the impacts of each footfall (measured on the G1: 2.5 deg mean error with instantaneous
-samples at 50 Hz, enough to make its policy walk 35 % further).
+the impacts of each footfall (the G1 walking, noise-free IMU: 0.49 deg mean error with
+period means, 1.36 deg with one sample per 20 ms; tests/envs/test_walking.py).
 """
 
 from __future__ import annotations
