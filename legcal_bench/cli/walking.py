@@ -1,5 +1,6 @@
-"""`legcal-bench walk`: a policy from its spec walking a robot, with offsets and an
-optional correction; one walk or paired trials."""
+"""`legcal-bench walk` (a policy from its spec walking a robot, with offsets and an
+optional correction; one walk or paired trials) and `walk-eval` (the closed-loop
+evaluation of a calibrator)."""
 
 from __future__ import annotations
 
@@ -88,6 +89,52 @@ def cmd_walk(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_walk_eval(a: argparse.Namespace) -> int:
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, calibrator_options, evaluate
+    from legcal_bench.provenance import code_version, describe
+    from legcal_bench.reports.closed_loop import write
+
+    if a.trials < 1 or a.seconds <= 0:
+        raise ConfigError(f"--trials {a.trials} / --seconds {a.seconds}: need trials >= 1 and seconds > 0")
+    options = calibrator_options(a.calibrator)
+    if a.setting:
+        options["setting"] = a.setting
+    for kv in a.option or []:
+        k, _, v = kv.partition("=")
+        options[k] = v
+    offsets = [a.offsets] if not a.sweep else [
+        (a.offsets.split("@")[0] + "@" if "@" in a.offsets else a.offsets.split(":")[0] + ":") + f"{d:g}"
+        for d in a.sweep]
+    from legcal_bench.benchmark.runner import make_executor
+    from legcal_bench.policies.runner import PolicyRunner
+    from legcal_bench.robots import load_robot
+
+    PolicyRunner(a.policy, load_robot(a.robot, a.mjcf))  # a bad spec or robot fails here, before any worker
+    executor, client = make_executor(a.scheduler, a.workers) if a.workers > 1 or a.scheduler else (None, None)
+    summaries, trials = [], []
+    try:
+        for off in offsets:
+            cfg = ClosedLoopConfig(robot=a.robot, policy=a.policy, offsets=off, trials=a.trials, seconds=a.seconds,
+                                   calibrator=a.calibrator, options=options, static_sensors=a.static_sensors,
+                                   walk_sensors=a.sensors, mjcf=a.mjcf)
+            s, t = evaluate(cfg, executor, progress=not a.quiet)
+            summaries.append(s)
+            trials.append(t)
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        if client is not None:
+            client.close()
+    made_by = (f"legcal-bench walk-eval --robot {a.robot} --policy {a.policy} --offsets {a.offsets} --trials {a.trials} "
+               f"--calibrator {a.calibrator}" + (f" --setting {a.setting}" if a.setting else "")
+               + (" --sweep " + " ".join(f"{d:g}" for d in a.sweep) if a.sweep else "")
+               + (f" --static-sensors {a.static_sensors}" if a.static_sensors != "calibrated-imu" else ""))
+    print(write(a.out, summaries, trials, describe(code_version()), made_by))
+    print(f"wrote {a.out}/report.md")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.sim.offsets import PRESETS_HELP
 
@@ -109,3 +156,25 @@ def add_commands(sub) -> None:
     w.add_argument("--out", default=None, help="write the walk (or trials) as JSON")
     w.add_argument("--json", action="store_true")
     w.set_defaults(func=cmd_walk)
+
+    e = sub.add_parser("walk-eval", help="the closed-loop evaluation: per trial a static calibration with the same "
+                                         "offsets, then nominal, uncorrected, corrected and oracle walks")
+    robot_args(e)
+    e.add_argument("--policy", required=True, help="policy spec YAML")
+    e.add_argument("--offsets", default="paper@3", help="paper@<deg> (the paper's signs, every joint) or "
+                                                        "random:<deg> (a pattern per trial)")
+    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg) to sweep, e.g. 1 2 3")
+    e.add_argument("--trials", type=int, default=35)
+    e.add_argument("--seconds", type=float, default=20.0)
+    e.add_argument("--calibrator", default="interfoot")
+    e.add_argument("--setting", default=None, help="the calibrator's setting (default: its sensor-matched variant "
+                                                   "where it has one)")
+    e.add_argument("--option", action="append", help="calibrator option k=v (repeatable)")
+    e.add_argument("--static-sensors", default="calibrated-imu", help="sensors of the static session sets "
+                                                                      "(default calibrated-imu; also realistic)")
+    e.add_argument("--sensors", default="realistic", help="sensors while walking")
+    e.add_argument("--workers", type=int, default=2, help="local worker processes (default 2; 1 runs here)")
+    e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786)")
+    e.add_argument("--out", default="reports/walk_eval", help="report folder (report.md, report.json, plots)")
+    e.add_argument("--quiet", action="store_true")
+    e.set_defaults(func=cmd_walk_eval)

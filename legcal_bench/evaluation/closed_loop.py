@@ -1,0 +1,159 @@
+"""The closed-loop evaluation: what a calibration does to a walking policy (issue #15).
+
+Per trial (seed s), paired: the offsets of the trial (`trial_offsets`: `paper@D` the
+same in every trial, `random:D` a pattern per trial) are put on the robot, and
+
+  1. a static session set of the same robot with the same offsets and fresh noise is
+     collected (weld floor, `calibrated-imu` sensors, stances I-IV, no held-out
+     sessions by default) and calibrated by the method under test; its estimate is
+     frozen before any walking;
+  2. four 20 s walks with the same seed (sensor noise, initial jitter):
+       nominal      no offsets
+       uncorrected  the offsets, no correction
+       corrected    the offsets, corrected by the estimate (q_enc + dq_hat)
+       oracle       the offsets, corrected by the true offsets
+
+Metrics per condition against the same seed's nominal walk (`deviation`): pelvis-
+trajectory and foot-strike RMS deviation (mm; trials where either walk fell are
+excluded and counted), upright, time to fall, mean torque and power. The oracle walk
+repeats the nominal one up to floating-point rounding (same seed, same true joint
+targets), so its deviation is not a noise floor; the noise floor is the nominal
+seed-to-seed spread: a nominal walk with other sensor noise and initial jitter
+(`SPREAD_SEED_OFFSET`) against the trial's nominal walk. Trials run through
+any `concurrent.futures.Executor` (local processes, or Dask's), one trial a task.
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from legcal_bench.evaluation.metrics import rms
+from legcal_bench.evaluation.walk import deviation, trial_offsets, walk
+
+CONDITIONS = ("nominal", "uncorrected", "corrected", "oracle")
+STATIC_SEED_BASE = 30_000  # the static session set of trial s is collected with seed STATIC_SEED_BASE + s
+PATH_STEP = 5  # pelvis paths kept for the plot: every 5th control step
+SPREAD_SEED_OFFSET = 100_000  # the spread walk of trial s uses seed s + SPREAD_SEED_OFFSET
+
+
+@dataclass(frozen=True)
+class ClosedLoopConfig:
+    robot: str
+    policy: str  # spec path
+    offsets: str = "paper@3"
+    trials: int = 35
+    seconds: float = 20.0
+    calibrator: str = "interfoot"
+    options: dict = field(default_factory=dict)  # the calibrator's; `calibrator_options` picks the default
+    static_mode: str = "weld"
+    static_sensors: str = "calibrated-imu"
+    walk_sensors: str = "realistic"
+    heldout: int = 0
+    first_seed: int = 0
+    mjcf: str | None = None
+
+
+def calibrator_options(name: str) -> dict:
+    """The calibrator's sensor-matched variant where it has one (`benchmark_variants`),
+    else its defaults."""
+    from legcal_bench.calibrators.base import available_calibrators
+
+    cls = available_calibrators().get(name)
+    variants = cls.benchmark_variants() if cls is not None and hasattr(cls, "benchmark_variants") else {}
+    return dict(variants.get("sensor", {}))
+
+
+def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
+    """One trial: the static calibration, then the four walks."""
+    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.envs.walking import WalkingEnv
+    from legcal_bench.policies.runner import PolicyRunner
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.robots import load_robot
+
+    legmap = load_robot(cfg.robot, cfg.mjcf)
+    dq = trial_offsets(cfg.offsets, legmap, seed)
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
+                              sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
+                tmp, progress=False)
+        result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, load_session(tmp, robot=legmap))
+    dq_hat = result.offsets_vector(legmap.joint_names)
+    static_s = time.perf_counter() - t0
+    env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
+    runner = PolicyRunner(env.policy_spec, legmap)
+    options = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, dq_hat),
+               "oracle": (dq, dq)}
+    walks = {c: walk(env, runner, cfg.seconds, seed, {"offsets": o, "correction": k}) for c, (o, k) in options.items()}
+    spread = walk(env, runner, cfg.seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
+    out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": dq_hat.tolist(),
+           "recovery_rms_deg": float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
+           "calibration_warnings": result.warnings, "privileged": runner.spec.privileged}
+    for c, w in walks.items():
+        row = {"upright": w.upright, "fallen_at": w.fallen_at, "torque_mean": w.torque_mean,
+               "power_mean": w.power_mean, "wall_s": w.wall_s,
+               "path": w.pelvis[::PATH_STEP, :2].round(4).tolist()}
+        if c != "nominal" and w.upright and walks["nominal"].upright:
+            row.update(deviation(w, walks["nominal"]))
+        out[c] = row
+    out["spread"] = deviation(spread, walks["nominal"]) if spread.upright and walks["nominal"].upright else {}
+    out["spread"]["upright"] = spread.upright
+    return out
+
+
+def _stat(values) -> dict | None:
+    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
+    return {"mean": float(v.mean()), "std": float(v.std()), "n": int(v.size)} if v.size else None
+
+
+def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
+    """Mean +- std over trials per condition, and the ratios the paper reports."""
+    conds = {}
+    for c in CONDITIONS:
+        rows = [t[c] for t in trials]
+        conds[c] = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
+                    "time_to_fall_s": _stat([r["fallen_at"] for r in rows if r["fallen_at"] is not None]),
+                    "torque_mean": _stat([r["torque_mean"] for r in rows]),
+                    "power_mean": _stat([r["power_mean"] for r in rows])}
+        if c != "nominal":
+            for k in ("foot_strike_rms_mm", "pelvis_rms_mm"):
+                conds[c][k] = _stat([r.get(k) for r in rows])
+    ratios = {}
+    for k in ("foot_strike_rms_mm", "pelvis_rms_mm"):
+        u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else np.nan for c in ("uncorrected", "corrected", "oracle"))
+        ratios[k] = {"corrected_over_uncorrected": float(cor / u), "corrected_over_oracle": float(cor / ora)}
+    spread = {k: _stat([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
+    return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread,
+            "recovery_rms_deg": _stat([t["recovery_rms_deg"] for t in trials]),
+            "static_s": _stat([t["static_s"] for t in trials]),
+            "walk_s": _stat([t[c]["wall_s"] for t in trials for c in CONDITIONS]),
+            "privileged": trials[0]["privileged"] if trials else []}
+
+
+def evaluate(cfg: ClosedLoopConfig, executor=None, progress: bool = True) -> tuple[dict, list[dict]]:
+    """All trials (through `executor` if given, else here), summarized."""
+    from tqdm import tqdm
+
+    seeds = range(cfg.first_seed, cfg.first_seed + cfg.trials)
+    bar = tqdm(total=cfg.trials, desc=f"walk-eval {cfg.offsets} {cfg.calibrator}", unit="trial", disable=not progress)
+    trials = []
+    if executor is None:
+        for s in seeds:
+            trials.append(run_trial(cfg, s))
+            bar.update(1)
+    else:
+        from concurrent.futures import as_completed
+
+        futures = [executor.submit(run_trial, cfg, s) for s in seeds]
+        for f in as_completed(futures):
+            trials.append(f.result())
+            bar.update(1)
+    bar.close()
+    trials.sort(key=lambda t: t["seed"])
+    return summarize(cfg, trials), trials
