@@ -131,7 +131,7 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
                + (" --sweep " + " ".join(f"{d:g}" for d in a.sweep) if a.sweep else "")
                + (f" --static-sensors {a.static_sensors}" if a.static_sensors != "calibrated-imu" else ""))
     print(write(a.out, summaries, trials, describe(code_version()), made_by))
-    print(f"wrote {a.out}/report.md")
+    print(f"wrote the report in {a.out}")
     return 0
 
 
@@ -175,6 +175,6 @@ def add_commands(sub) -> None:
     e.add_argument("--sensors", default="realistic", help="sensors while walking")
     e.add_argument("--workers", type=int, default=2, help="local worker processes (default 2; 1 runs here)")
     e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786)")
-    e.add_argument("--out", default="reports/walk_eval", help="report folder (report.md, report.json, plots)")
+    e.add_argument("--out", default="reports/walk_eval", help="report folder (markdown, its JSON, plots)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_walk_eval)
