@@ -19,7 +19,9 @@ excluded and counted), upright, time to fall, mean torque and power. The oracle 
 repeats the nominal one up to floating-point rounding (same seed, same true joint
 targets), so its deviation is not a noise floor; the noise floor is the nominal
 seed-to-seed spread: a nominal walk with other sensor noise and initial jitter
-(`SPREAD_SEED_OFFSET`) against the trial's nominal walk. Trials run through
+(`SPREAD_SEED_OFFSET`) against the trial's nominal walk. The leg-odometry check
+(`legcal_bench.evaluation.odometry`) runs on each nominal walk with the trial's offsets
+added to the logged encoders afterwards, before and after the trial's correction. Trials run through
 any `concurrent.futures.Executor` (local processes, or Dask's), one trial a task.
 """
 
@@ -38,6 +40,7 @@ CONDITIONS = ("nominal", "uncorrected", "corrected", "oracle")
 STATIC_SEED_BASE = 30_000  # the static session set of trial s is collected with seed STATIC_SEED_BASE + s
 PATH_STEP = 5  # pelvis paths kept for the plot: every 5th control step
 SPREAD_SEED_OFFSET = 100_000  # the spread walk of trial s uses seed s + SPREAD_SEED_OFFSET
+ODOMETRY_KEYS = ("vertical_mm", "forward_mm", "lateral_mm", "total_mm", "final_vertical_drift_mm")
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,8 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
     runner = PolicyRunner(env.policy_spec, legmap)
     options = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, dq_hat),
                "oracle": (dq, dq)}
-    walks = {c: walk(env, runner, cfg.seconds, seed, {"offsets": o, "correction": k}) for c, (o, k) in options.items()}
+    walks = {c: walk(env, runner, cfg.seconds, seed, {"offsets": o, "correction": k}, log=c == "nominal")
+             for c, (o, k) in options.items()}
     spread = walk(env, runner, cfg.seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
     out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": dq_hat.tolist(),
            "recovery_rms_deg": float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
@@ -104,6 +108,29 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         out[c] = row
     out["spread"] = deviation(spread, walks["nominal"]) if spread.upright and walks["nominal"].upright else {}
     out["spread"]["upright"] = spread.upright
+    out["odometry"] = trial_odometry(legmap, walks["nominal"], dq, dq_hat)
+    return out
+
+
+def trial_odometry(legmap, nominal, dq: np.ndarray, dq_hat: np.ndarray) -> dict:
+    """Leg odometry of the nominal walk with the trial's offsets added to its logged
+    encoders afterwards (q_enc - dq), before and after the correction (+ dq_hat), and
+    without offsets; and the vertical drift per degree of symmetric hip-pitch offset."""
+    from legcal_bench.evaluation.odometry import (centre_of_pressure, imu_orientation, leg_odometry, odometry_errors,
+                                                  pitch_sensitivity, pose_matrices, sole_from_ft)
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    kin = LegKinematics(legmap)
+    truth = pose_matrices(nominal.pelvis)
+    dt = float(nominal.time[1] - nominal.time[0])
+    R_WB = imu_orientation(nominal.gravity, nominal.ang_vel, dt, truth[0, :3, :3])
+    q, loads, p0 = nominal.q_enc, nominal.loads, truth[0, :3, 3]
+    frames = sole_from_ft(legmap)
+    cop = centre_of_pressure(nominal.ft, frames) if nominal.ft is not None and frames is not None else None
+    out = {name: odometry_errors(leg_odometry(kin, qq, loads, R_WB, p0, cop), truth)
+           for name, qq in (("no_offsets", q), ("before", q - dq), ("after", q - dq + dq_hat))}
+    out["pitch"] = pitch_sensitivity(kin, q, loads, R_WB, truth, cop)
+    out["contact_point"] = "centre of pressure" if cop is not None else "sole origin"
     return out
 
 
@@ -129,7 +156,12 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
         u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else np.nan for c in ("uncorrected", "corrected", "oracle"))
         ratios[k] = {"corrected_over_uncorrected": float(cor / u), "corrected_over_oracle": float(cor / ora)}
     spread = {k: _stat([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
-    return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread,
+    odometry = {name: {k: _stat([t["odometry"][name][k] for t in trials]) for k in ODOMETRY_KEYS}
+                for name in ("no_offsets", "before", "after")}
+    odometry["pitch_m_per_deg"] = _stat([t["odometry"]["pitch"]["m_per_deg"] for t in trials])
+    odometry["distance_m"] = _stat([t["odometry"]["pitch"]["distance_m"] for t in trials])
+    odometry["contact_point"] = trials[0]["odometry"]["contact_point"] if trials else None
+    return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread, "odometry": odometry,
             "recovery_rms_deg": _stat([t["recovery_rms_deg"] for t in trials]),
             "static_s": _stat([t["static_s"] for t in trials]),
             "walk_s": _stat([t[c]["wall_s"] for t in trials for c in CONDITIONS]),

@@ -34,33 +34,50 @@ class Walk:
     fallen_at: float | None
     wall_s: float
     privileged: list[str] = field(default_factory=list)  # observation terms read from the simulator
+    q_enc: np.ndarray | None = None  # (n, 12) the encoders the software read (with `log`)
+    loads: np.ndarray | None = None  # (n, 2) per-foot load: ankle force magnitude (N), else the contact load
+    gravity: np.ndarray | None = None  # (n, 3) the IMU filter's gravity direction, base frame
+    ang_vel: np.ndarray | None = None  # (n, 3) the gyro's rate, base frame
+    ft: np.ndarray | None = None  # (n, 2, 6) ankle wrenches, where the robot has the sensors
 
     @property
     def upright(self) -> bool:
         return self.fallen_at is None
 
     def summary(self) -> dict:
-        d = {k: v for k, v in asdict(self).items() if k not in ("time", "pelvis", "strikes")}
+        d = {k: v for k, v in asdict(self).items() if k not in ("time", "pelvis", "strikes", "q_enc", "loads", "gravity",
+                                                               "ang_vel", "ft")}
         d.update(upright=self.upright, duration_s=float(self.time[-1]) if len(self.time) else 0.0,
                  distance_m=float(np.linalg.norm(self.pelvis[-1, :2] - self.pelvis[0, :2])) if len(self.pelvis) else 0.0,
                  strike_counts={s: len(self.strikes[s]["time"]) for s in SIDES})
         return d
 
 
-def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on_step=None) -> Walk:
+def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on_step=None,
+         log: bool = False) -> Walk:
     """One episode of `seconds` (stopping early if the robot falls). `on_step(env)`
-    is called after each step (e.g. to render frames)."""
+    is called after each step (e.g. to render frames); `log` keeps the encoders and
+    per-foot loads of every step (for leg odometry)."""
     u = env.unwrapped
     obs, info = env.reset(seed=seed, options=options)
     runner.reset()
     n = int(round(seconds / u.dt))
     t, pelvis = np.empty(n), np.empty((n, 7))
+    logs = {"q_enc": np.empty((n, 12)), "loads": np.empty((n, 2)), "gravity": np.empty((n, 3)),
+            "ang_vel": np.empty((n, 3))} if log else {}
+    if log and "ft" in u.observation_space.spaces:
+        logs["ft"] = np.empty((n, 2, 6))
     torque, power = 0.0, 0.0
     k = 0
     t0 = _time.perf_counter()
     for k in range(n):
         obs, _, terminated, _, info = env.step(runner.act(obs, info, u.sim.time))
         t[k], pelvis[k] = info["time"], info["pelvis_pose"]
+        if log:
+            logs["q_enc"][k], logs["gravity"][k], logs["ang_vel"][k] = obs["q_enc"], obs["gravity"], obs["ang_vel"]
+            logs["loads"][k] = np.linalg.norm(obs["ft"][:, :3], axis=1) if "ft" in obs else info["foot_loads"]
+            if "ft" in logs:
+                logs["ft"][k] = obs["ft"]
         torque += float(np.abs(info["torque"]).mean())
         power += info["power"]
         if on_step is not None:
@@ -71,7 +88,7 @@ def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on
     steps = k + 1
     return Walk(seed, seconds, u.offsets.tolist(), u.correction.tolist(), t[:steps], pelvis[:steps],
                 u.sim.strikes.to_dict(), torque / steps, power / steps, info["fallen_at"], wall,
-                runner.spec.privileged)
+                runner.spec.privileged, **{k: v[:steps] for k, v in logs.items()})
 
 
 def deviation(a: Walk, nominal: Walk) -> dict:

@@ -10,7 +10,8 @@ import numpy as np
 from legcal_bench.evaluation.closed_loop import CONDITIONS
 from legcal_bench.files.plots import pyplot, save_figure
 from legcal_bench.files.reports import write_report
-from legcal_bench.paper import CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_OFFSET_DEG, CLOSED_LOOP_PELVIS_MM, CLOSED_LOOP_TRIALS
+from legcal_bench.paper import (CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_OFFSET_DEG, CLOSED_LOOP_PELVIS_MM,
+                                CLOSED_LOOP_TRIALS, LIDAR_RMS_MM, LIDAR_VERTICAL_DRIFT_M_PER_DEG)
 
 COLOURS = {"nominal": "black", "uncorrected": "tab:red", "corrected": "tab:blue", "oracle": "tab:green"}
 
@@ -28,6 +29,27 @@ def table(summary: dict) -> list[str]:
         L.append(f"| {name} | {r['upright']}/{r['trials']} | {_pm(r.get('foot_strike_rms_mm'), 1)} | "
                  f"{_pm(r.get('pelvis_rms_mm'), 1)} | {_pm(r['time_to_fall_s'], 2)} | {_pm(r['torque_mean'], 2)} | "
                  f"{_pm(r['power_mean'], 1)} |")
+    return L
+
+
+def odometry_table(summary: dict) -> list[str]:
+    o = summary["odometry"]
+    L = ["Leg kinematic-inertial odometry of the nominal walks (orientation from the IMU, position from the stance "
+         f"foot's contact point, its {o['contact_point']}, through forward kinematics; `legcal_bench.evaluation."
+         "odometry`), the simulator's truth as the reference, the trial's offsets added to the logged encoders "
+         "afterwards, before and after the trial's correction; RMS error (mm), mean ± std over trials:", "",
+         "| RMS error (mm) | no offsets | before | after | reduction | paper, before → after |",
+         "|---|---:|---:|---:|---:|---:|"]
+    for key, label, paper in (("vertical_mm", "vertical z", LIDAR_RMS_MM["vertical"]),
+                              ("forward_mm", "forward x", LIDAR_RMS_MM["forward"]),
+                              ("lateral_mm", "lateral y", LIDAR_RMS_MM["lateral"]),
+                              ("total_mm", "total 3-D", LIDAR_RMS_MM["total_3d"])):
+        b, a = o["before"][key], o["after"][key]
+        red = f"{100 * (1 - a['mean'] / b['mean']):.1f} %" if b and a else "–"
+        L.append(f"| {label} | {_pm(o['no_offsets'][key])} | {_pm(b)} | {_pm(a)} | {red} | {paper[0]} → {paper[1]} |")
+    L += ["", f"Vertical drift per degree of symmetric hip-pitch offset (final height error, least squares over "
+          f"-3..3 deg): {_pm(o['pitch_m_per_deg'], 3)} m/deg over {_pm(o['distance_m'], 1)} m walked, i.e. one "
+          f"degree's tangent times the distance (paper: {LIDAR_VERTICAL_DRIFT_M_PER_DEG} m/deg over its walks)."]
     return L
 
 
@@ -75,6 +97,7 @@ def write(out: str | Path, summaries: list[dict], trials: list[list[dict]], code
               f"{_pm(s['recovery_rms_deg'], 4)} deg; per trial: static collection + calibration "
               f"{_pm(s['static_s'], 2)} s, a walk {_pm(s['walk_s'], 2)} s wall.", "",
               f"![pelvis paths]({png.name})"]
+        L += ["", *odometry_table(s)]
     fs, pv = CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_PELVIS_MM
     L += ["", f"Paper (real A3, {CLOSED_LOOP_TRIALS} trials at {CLOSED_LOOP_OFFSET_DEG:g} deg): foot strike "
           f"{fs[0]} -> {fs[1]} mm ({100 * fs[1] / fs[0]:.1f} %), pelvis {pv[0]} -> {pv[1]} mm "

@@ -30,3 +30,34 @@ def test_one_trial_calibrates_then_walks_four_conditions(tmp_path, capsys):
     assert s["nominal_spread"]["pelvis_rms_mm"]["n"] == 1
     assert (tmp_path / "paths_paper_3.png").stat().st_size > 10_000
     assert "| corrected | 1/1 |" in (tmp_path / "report.md").read_text()
+
+
+@needs_g1
+def test_leg_odometry_follows_the_walk_and_a_hip_pitch_offset_tilts_it():
+    import numpy as np
+
+    from legcal_bench.envs.walking import WalkingEnv
+    from legcal_bench.evaluation.odometry import (centre_of_pressure, imu_orientation, leg_odometry, odometry_errors,
+                                                  pitch_sensitivity, pose_matrices, sole_from_ft)
+    from legcal_bench.evaluation.walk import walk
+    from legcal_bench.policies.runner import PolicyRunner
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    env = WalkingEnv(robot=str(G1_LEGMAP), policy=str(G1_POLICY))
+    w = walk(env, PolicyRunner(env.policy_spec, env.legmap), 6.0, seed=2, options={"offsets": "none"}, log=True)
+    kin, truth = LegKinematics(env.legmap), pose_matrices(w.pelvis)
+    R = imu_orientation(w.gravity, w.ang_vel, env.dt, truth[0, :3, :3])
+    cop = centre_of_pressure(w.ft, sole_from_ft(env.legmap))
+    # Centres of pressure stay on the sole (G1: 0.17 m long, 0.06 m wide), give or take light loads.
+    loaded = w.loads > 100
+    assert np.percentile(np.abs(cop[..., 0][loaded]), 95) < 0.1 and np.percentile(np.abs(cop[..., 1][loaded]), 95) < 0.05
+    e = odometry_errors(leg_odometry(kin, w.q_enc, w.loads, R, truth[0, :3, 3], cop), truth)
+    moved = np.linalg.norm(truth[-1, :2, 3] - truth[0, :2, 3])
+    assert moved > 2.0 and e["total_mm"] < 0.02 * 1e3 * moved  # within 2 % of the distance walked
+    # Anchoring the sole's origin instead drifts more: a rolling foot's origin leaves the floor.
+    e0 = odometry_errors(leg_odometry(kin, w.q_enc, w.loads, R, truth[0, :3, 3]), truth)
+    assert e0["vertical_mm"] > 1.5 * e["vertical_mm"]
+    # A symmetric hip-pitch offset tilts the kinematic base: height drifts by about the
+    # offset's tangent times the distance.
+    s = pitch_sensitivity(kin, w.q_enc, w.loads, R, truth, cop)
+    assert s["m_per_deg"] == pytest.approx(np.tan(np.deg2rad(1)) * moved, rel=0.15)
