@@ -27,13 +27,8 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.evaluation.metrics import rms
+from legcal_bench.geometry.poses import pos_quat_to_homogeneous
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
-
-
-def _homogeneous(R: np.ndarray, p: np.ndarray) -> np.ndarray:
-    T = np.zeros((len(R), 4, 4))
-    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, p, 1.0
-    return T
 
 
 def imu_orientation(gravity: np.ndarray, ang_vel: np.ndarray, dt: float, R0: np.ndarray) -> np.ndarray:
@@ -111,11 +106,8 @@ def leg_odometry(kin: LegKinematics, q: np.ndarray, loads: np.ndarray, R_WB: np.
 
 
 def pose_matrices(poses: np.ndarray) -> np.ndarray:
-    """(n, 4, 4) from [x y z qw qx qy qz] rows."""
-    from scipy.spatial.transform import Rotation
-
-    R = Rotation.from_quat(poses[:, [4, 5, 6, 3]]).as_matrix()
-    return _homogeneous(R, poses[:, :3])
+    """(n, 4, 4) from [x y z qw qx qy qz] rows (the walk's pelvis poses)."""
+    return pos_quat_to_homogeneous(poses)
 
 
 def odometry_errors(est: np.ndarray, truth: np.ndarray) -> dict:

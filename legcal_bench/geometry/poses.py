@@ -42,6 +42,15 @@ def homogeneous_to_pos_quat(H: np.ndarray) -> np.ndarray:
     return np.concatenate([H[..., :3, 3], q[..., 3:], q[..., :3]], axis=-1)
 
 
+def pos_quat_to_homogeneous(v: np.ndarray) -> np.ndarray:
+    """(n, 4, 4) from rows [x, y, z, qw, qx, qy, qz] (MuJoCo's quaternion order)."""
+    v = np.atleast_2d(np.asarray(v, dtype=float))
+    H = np.zeros((len(v), 4, 4))
+    H[:, :3, :3] = Rotation.from_quat(v[:, [4, 5, 6, 3]]).as_matrix()
+    H[:, :3, 3], H[:, 3, 3] = v[:, :3], 1.0
+    return H
+
+
 def pos_quat_to_se3(v) -> pin.SE3:
     v = np.asarray(v, dtype=float)
     return se3(from_wxyz(v[3:7]).as_matrix(), v[:3])
