@@ -25,7 +25,7 @@ import numpy as np
 
 from legcal_bench.benchmark.suites import SUITES, Suite, get_suite
 from legcal_bench.calibrators.base import available_calibrators, get_calibrator
-from legcal_bench.errors import CalibrationError
+from legcal_bench.errors import ConfigError, CalibrationError
 from legcal_bench.protocol.collect import CollectConfig
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots import available, load_robot, resolve_robot, robot_label
@@ -148,6 +148,9 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
     its robots, modes, seeds or collection overrides replaced."""
     if suite in SUITES:
         s = SUITES[suite]
+        if "closed_loop" in s.tags:
+            raise ConfigError(f"suite {suite!r} walks, it has no static cells: run it with legcal-bench bench "
+                              f"--suite {suite} (legcal_bench.benchmark.closed_loop)")
     elif robots is not None and modes is not None and seeds is not None:
         s = Suite(suite, (), (), 1)  # an ad-hoc plan, e.g. a sweep
     else:

@@ -36,6 +36,10 @@ SUITES: dict[str, Suite] = {
         Suite("full", ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE), ("kinematic", "weld", "contact"), 10, {},
               ("static", "leaderboard", "external_robot", "all_floors"),
               "adds the Unitree G1 through its leg map and the kinematic and contact floors (~30 min)"),
+        # Walking, not static cells: run by `legcal_bench.benchmark.closed_loop` (seeds = trials).
+        Suite("closed-loop", (G1_EXAMPLE,), ("walking",), 35, {}, ("closed_loop", "leaderboard", "external_robot"),
+              "every calibrator variant's estimate walked by the G1's published policy at paper@3 and random:3, "
+              "35 trials (~5 min; the A2-like and A3-like robots join with their own policies)"),
     )
 }
 

@@ -16,7 +16,9 @@ def cmd_bench(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark.runner import run
     from legcal_bench.benchmark.suites import get_suite
 
-    get_suite(a.suite)
+    suite = get_suite(a.suite)
+    if "closed_loop" in suite.tags:
+        return _bench_closed_loop(a, suite)
     cells = planning.plan(a.suite, robots=a.robots, modes=a.modes, seeds=a.seeds, calibrators=a.calibrators,
                           collect_overrides=_collect_overrides(a))
     out = Path(a.out)
@@ -28,6 +30,31 @@ def cmd_bench(a: argparse.Namespace) -> int:
     print("\n".join(line for line in tables.splitlines() if not line.startswith("![")).strip() + "\n")
     print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {wall:.0f} s wall; "
           f"leaderboard: {out / 'README.md'}")
+    return 0
+
+
+def _bench_closed_loop(a: argparse.Namespace, suite) -> int:
+    """The closed-loop suite: walk-eval with every calibrator variant, then the leaderboard."""
+    from legcal_bench.benchmark.closed_loop import run_closed_loop_suite
+    from legcal_bench.benchmark.leaderboard import generate
+    from legcal_bench.benchmark.runner import make_executor
+
+    out = Path(a.out)
+    t0 = time.perf_counter()
+    executor, client = make_executor(a.scheduler, a.workers)
+    try:
+        files = run_closed_loop_suite(out, trials=a.seeds or suite.seeds, executor=executor, robots=a.robots,
+                                      progress=not a.quiet)
+    finally:
+        executor.shutdown()
+        if client is not None:
+            client.close()
+    text = generate(out)
+    if "## Closed loop" in text:
+        section = text[text.index("## Closed loop"):]
+        print("\n".join(section.split("\n## ")[0].splitlines()))
+    print(f"{len(files)} closed-loop results in {out}, {time.perf_counter() - t0:.0f} s wall; leaderboard: "
+          f"{out / 'README.md'}")
     return 0
 
 
@@ -147,7 +174,8 @@ def add_commands(sub) -> None:
     bn.add_argument("--suite", default="smoke", help=f"one of: {suites}")
     _robot_options(bn, None)
     bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes")
-    bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds")
+    bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds (closed-loop: "
+                                                             "trials)")
     bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")

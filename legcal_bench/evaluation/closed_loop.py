@@ -58,6 +58,9 @@ class ClosedLoopConfig:
     heldout: int = 0
     first_seed: int = 0
     mjcf: str | None = None
+    # More methods on the same static sets and walks: (label, calibrator, options as
+    # sorted items), each with its own corrected walk (the closed-loop suite).
+    variants: tuple = ()
 
 
 def calibrator_options(name: str) -> dict:
@@ -86,7 +89,10 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
                               sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
                 tmp, progress=False)
-        result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, load_session(tmp, robot=legmap))
+        recs = load_session(tmp, robot=legmap)
+        result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, recs)
+        others = {label: get_calibrator(name, **dict(opts)).calibrate(legmap, recs).offsets_vector(legmap.joint_names)
+                  for label, name, opts in cfg.variants}
     dq_hat = result.offsets_vector(legmap.joint_names)
     static_s = time.perf_counter() - t0
     env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
@@ -106,6 +112,13 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         if c != "nominal" and w.upright and walks["nominal"].upright:
             row.update(deviation(w, walks["nominal"]))
         out[c] = row
+    out["variants"] = {}
+    for label, est in others.items():
+        w = walk(env, runner, cfg.seconds, seed, {"offsets": dq, "correction": est})
+        row = {"upright": w.upright, "fallen_at": w.fallen_at, "recovery_rms_deg": float(np.degrees(rms(est - dq)))}
+        if w.upright and walks["nominal"].upright:
+            row.update(deviation(w, walks["nominal"]))
+        out["variants"][label] = row
     out["spread"] = deviation(spread, walks["nominal"]) if spread.upright and walks["nominal"].upright else {}
     out["spread"]["upright"] = spread.upright
     out["odometry"] = trial_odometry(legmap, walks["nominal"], dq, dq_hat)
@@ -156,12 +169,23 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
         u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else np.nan for c in ("uncorrected", "corrected", "oracle"))
         ratios[k] = {"corrected_over_uncorrected": float(cor / u), "corrected_over_oracle": float(cor / ora)}
     spread = {k: _stat([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
+    variants = {}
+    for label in (trials[0]["variants"] if trials else {}):
+        rows = [t["variants"][label] for t in trials]
+        v = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
+             "recovery_rms_deg": _stat([r["recovery_rms_deg"] for r in rows]),
+             **{k: _stat([r.get(k) for r in rows]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}}
+        unc = conds["uncorrected"]["foot_strike_rms_mm"]
+        v["corrected_over_uncorrected"] = (v["foot_strike_rms_mm"]["mean"] / unc["mean"]
+                                           if v["foot_strike_rms_mm"] and unc else None)
+        variants[label] = v
     odometry = {name: {k: _stat([t["odometry"][name][k] for t in trials]) for k in ODOMETRY_KEYS}
                 for name in ("no_offsets", "before", "after")}
     odometry["pitch_m_per_deg"] = _stat([t["odometry"]["pitch"]["m_per_deg"] for t in trials])
     odometry["distance_m"] = _stat([t["odometry"]["pitch"]["distance_m"] for t in trials])
     odometry["contact_point"] = trials[0]["odometry"]["contact_point"] if trials else None
     return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread, "odometry": odometry,
+            "variants": variants,
             "recovery_rms_deg": _stat([t["recovery_rms_deg"] for t in trials]),
             "static_s": _stat([t["static_s"] for t in trials]),
             "walk_s": _stat([t[c]["wall_s"] for t in trials for c in CONDITIONS]),

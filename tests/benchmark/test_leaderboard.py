@@ -14,6 +14,8 @@ def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
     shutil.copytree(LEADERBOARD / "results", tmp_path / "results")
     if (LEADERBOARD / "designed" / "results").is_dir():  # the protocol comparison reads it
         shutil.copytree(LEADERBOARD / "designed" / "results", tmp_path / "designed" / "results")
+    if (LEADERBOARD / "closed_loop").is_dir():  # and the closed-loop section this
+        shutil.copytree(LEADERBOARD / "closed_loop", tmp_path / "closed_loop")
     text = generate(tmp_path)
     assert text == (LEADERBOARD / "README.md").read_text()
     for png in (tmp_path / "plots").iterdir():

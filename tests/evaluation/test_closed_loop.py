@@ -61,3 +61,26 @@ def test_leg_odometry_follows_the_walk_and_a_hip_pitch_offset_tilts_it():
     # offset's tangent times the distance.
     s = pitch_sensitivity(kin, w.q_enc, w.loads, R, truth, cop)
     assert s["m_per_deg"] == pytest.approx(np.tan(np.deg2rad(1)) * moved, rel=0.15)
+
+
+@needs_g1
+def test_the_closed_loop_suite_gives_every_variant_a_row_and_resumes(tmp_path, capsys):
+    from legcal_bench.benchmark.plan import plan
+    from legcal_bench.cli import main
+    from legcal_bench.errors import ConfigError
+
+    with pytest.raises(ConfigError, match="walks, it has no static cells"):
+        plan("closed-loop")
+    args = ["bench", "--suite", "closed-loop", "--seeds", "1", "--workers", "1", "--out", str(tmp_path), "--quiet"]
+    assert main(args) == 0
+    files = sorted((tmp_path / "closed_loop").glob("*.json"))
+    assert [f.name for f in files] == ["unitree_g1_paper3.json", "unitree_g1_random3.json"]
+    text = (tmp_path / "README.md").read_text()
+    section = text[text.index("## Closed loop"):]
+    for row in ("interfoot-sensor", "interfoot-operating", "yamane-sensor", "zero-default", "*uncorrected*"):
+        assert f"| {row} | 1/1 |" in section
+    # zero-default corrects nothing: its walk is the uncorrected one.
+    assert "| zero-default | 1/1 | 3.0000 ± 0.0000 |" in section and "100.00 %" in section
+    stamp = files[0].stat().st_mtime_ns
+    capsys.readouterr()
+    assert main(args) == 0 and files[0].stat().st_mtime_ns == stamp  # kept: same key

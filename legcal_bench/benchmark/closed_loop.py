@@ -1,0 +1,85 @@
+"""The closed-loop suite: every registered calibrator variant judged by what its
+estimate does to a walking policy (issue #15), beside recovery in the leaderboard.
+
+For each robot with a walking policy (`CLOSED_LOOP_ROBOTS`) and each offset pattern
+(`CLOSED_LOOP_OFFSETS`), one closed-loop evaluation (`legcal_bench.evaluation.closed_loop`)
+whose static session sets are calibrated by every variant, each variant then walking
+corrected by its own estimate against the same nominal, uncorrected and oracle walks.
+One result file per robot and pattern (`<root>/closed_loop/<robot>_<pattern>.json`),
+kept if its key (the evaluation's config and `RESULTS_VERSION`) matches.
+
+The A2-like and A3-like robots join when they have policies of their own (issue #14);
+until then the suite runs the G1 with its published policy.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from legcal_bench.benchmark.plan import calibrator_variants
+from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, evaluate
+from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.provenance import RESULTS_VERSION, code_version, stable_hash
+
+CLOSED_LOOP_ROBOTS = {G1_EXAMPLE: "examples/unitree_g1.policy.yaml"}  # robot -> policy spec
+CLOSED_LOOP_OFFSETS = ("paper@3", "random:3")
+PRIMARY = ("interfoot", "sensor")  # the variant whose walks the report's "corrected" row shows
+RESULTS_DIR = "closed_loop"
+
+
+def result_path(root: Path, robot: str, offsets: str) -> Path:
+    from legcal_bench.robots import robot_label
+
+    return root / RESULTS_DIR / f"{robot_label(robot)}_{offsets.replace(':', '').replace('@', '')}.json"
+
+
+def suite_configs(trials: int, robots=None) -> list[ClosedLoopConfig]:
+    """One evaluation per robot and pattern, every calibrator variant on it."""
+    variants = calibrator_variants()
+    primary = next(((n, v, o) for n, v, o in variants if (n, v) == PRIMARY), variants[0])
+    extra = tuple((f"{n}-{v}", n, tuple(sorted(o.items()))) for n, v, o in variants)
+    out = []
+    for robot, policy in CLOSED_LOOP_ROBOTS.items():
+        if robots and robot not in robots:
+            continue
+        for offsets in CLOSED_LOOP_OFFSETS:
+            out.append(ClosedLoopConfig(robot=robot, policy=policy, offsets=offsets, trials=trials,
+                                        calibrator=primary[0], options=dict(primary[2]), variants=extra))
+    return out
+
+
+def key(cfg: ClosedLoopConfig) -> str:
+    from dataclasses import asdict
+
+    return stable_hash({"config": asdict(cfg), "results_version": RESULTS_VERSION})
+
+
+def run_closed_loop_suite(root: str | Path, trials: int = 35, executor=None, robots=None,
+                          progress: bool = True) -> list[Path]:
+    """Run (or keep) every evaluation of the suite; returns the result files."""
+    from legcal_bench.robots import resolve_robot
+
+    root = Path(root)
+    written = []
+    for cfg in suite_configs(trials, robots):
+        try:
+            resolve_robot(cfg.robot)
+        except Exception as e:  # the G1 outside a checkout with ../shared: skipped, said why
+            print(f"closed-loop suite: skipping {cfg.robot}: {e}")
+            continue
+        path = result_path(root, cfg.robot, cfg.offsets)
+        try:
+            if json.loads(path.read_text()).get("key") == key(cfg):
+                written.append(path)
+                continue
+        except (OSError, ValueError):
+            pass
+        summary, trial_rows = evaluate(cfg, executor, progress=progress)
+        atomic_write_json(path, {"key": key(cfg), "provenance": code_version(), "summary": summary,
+                                 "trials": [{k: v for k, v in t.items() if k not in ("nominal", "uncorrected",
+                                                                                     "corrected", "oracle")}
+                                            for t in trial_rows]})
+        written.append(path)
+    return written
