@@ -229,6 +229,7 @@ def _closed_loop(root: Path) -> list[str]:
     """The closed-loop suite's results (`legcal_bench.benchmark.closed_loop`), one table
     per robot and offset pattern: each variant's corrected walk beside the references."""
     from legcal_bench.benchmark.closed_loop import RESULTS_DIR
+    from legcal_bench.robots import robot_label
 
     files = sorted((root / RESULTS_DIR).glob("*.json"))
     if not files:
@@ -244,7 +245,7 @@ def _closed_loop(root: Path) -> list[str]:
         d = json.loads(f.read_text())
         s, cfg = d["summary"], d["summary"]["config"]
         c = s["conditions"]
-        L += [f"### {Path(cfg['robot']).name.replace('.legmap.yaml', '')} — `{cfg['offsets']}` — policy "
+        L += [f"### {robot_label(cfg['robot'])} — `{cfg['offsets']}` — policy "
               f"`{Path(cfg['policy']).name}` ({cfg['trials']} trials)", "",
               f"Produced by {describe(d['provenance'])}.", "",
               "| calibrator-variant | upright | recovery RMS (deg) | foot-strike dev (mm) | pelvis dev (mm) | "
