@@ -127,3 +127,25 @@ def test_the_imu_filter_integrates_period_means_not_aliased_samples():
     m, s = np.mean(err_mean[100:]), np.mean(err_sampled[100:])  # after the first 2 s
     print(f"gravity error, mean over 2-10 s of walking: period means {m:.2f} deg, instantaneous samples {s:.2f} deg")
     assert s > 2 * m
+
+
+@needs_g1
+def test_walk_refuses_a_spec_for_another_robot_and_bad_offsets(capsys, tmp_path):
+    import yaml
+
+    from legcal_bench.cli import main
+
+    # Joints are matched by name: a spec naming a joint the robot lacks is refused.
+    doc = yaml.safe_load(G1_POLICY.read_text())
+    doc["joints"][0] = "left_hip_pitch_motor"
+    doc["model"]["file"] = str((G1_POLICY.parent / doc["model"]["file"]).resolve())
+    other = tmp_path / "other.policy.yaml"
+    other.write_text(yaml.safe_dump(doc))
+    assert main(["walk", "--robot", str(G1_LEGMAP), "--policy", str(other), "--seconds", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "not in the leg map: ['left_hip_pitch_motor']" in err and "does not drive: ['left_hip_pitch_joint']" in err
+    assert main(["walk", "--robot", str(G1_LEGMAP), "--policy", str(G1_POLICY), "--offsets", "paper@99"]) == 2
+    assert "must be in [0, 10] degrees" in capsys.readouterr().err
+    assert main(["walk", "--robot", str(G1_LEGMAP), "--policy", "nowhere.yaml"]) == 2
+    assert "not a readable YAML file" in capsys.readouterr().err
+    assert main(["walk-eval", "--robot", str(G1_LEGMAP), "--policy", str(G1_POLICY), "--trials", "0"]) == 2
