@@ -84,6 +84,8 @@ def cmd_walk(a: argparse.Namespace) -> int:
           f"(max {np.degrees(np.abs(dq)).max():.2f} deg): {state}; walked {s['distance_m']:.2f} m in "
           f"{s['duration_s']:.1f} s, strikes L/R {s['strike_counts']['left']}/{s['strike_counts']['right']}, mean "
           f"torque {w.torque_mean:.1f} N m, power {w.power_mean:.0f} W; {w.wall_s:.2f} s wall ({code})")
+    if w.privileged:
+        print(f"  the policy read privileged observation terms from the simulator: {', '.join(w.privileged)}")
     if "strip" in s:
         print(f"wrote {s['strip']}")
     return 0
