@@ -32,3 +32,31 @@ def test_bad_arguments_are_refused():
         preview_gains(-0.8, 0.01)
     with pytest.raises(ValueError):
         preview_gains(0.8, 0.01, preview_s=0.001)
+
+
+def test_the_gait_plan_puts_the_zmp_on_the_stance_foot_and_ik_closes_the_chain():
+    from legcal_bench.policies.zmp_walker import GaitParams, joint_targets, plan_gait
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
+
+    kin = LegKinematics(load_robot("a3"))
+    p = GaitParams()
+    gait = plan_gait(kin, 4, p)
+    y0 = kin.dims.foot_y
+    # Right, left, right steps of 0.12 m, then the left closes the feet: 0.36 m.
+    assert gait.distance == pytest.approx(0.36)
+    assert gait.left[-1, 0] == pytest.approx(0.36) and gait.right[-1, 0] == pytest.approx(0.36)
+    assert np.allclose(gait.zmp[0], 0) and np.allclose(gait.zmp[-1], [0.36, 0])
+    # Never both feet in the air; never above the lift.
+    up = np.stack([gait.left[:, 2], gait.right[:, 2]]) > 1e-9
+    assert not (up[0] & up[1]).any() and gait.left[:, 2].max() <= p.lift + 1e-12
+    # In single support the ZMP is on the stance foot.
+    single = up[0] | up[1]
+    stance_y = np.where(up[1], y0, -y0)
+    assert np.allclose(gait.zmp[single, 1], stance_y[single])
+    # The joint targets put both soles where the plan does, relative to each other.
+    Q = joint_targets(kin, gait, p)
+    fk = frame_kinematics(kin, Q)
+    planned = gait.right - gait.left
+    got = np.einsum("nji,nj->ni", fk.R_L, fk.p_R - fk.p_L)  # right sole in the left sole's (level) frame
+    assert np.abs(got - planned).max() < 1e-3
