@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from legcal_bench.evaluation.metrics import rms
+from legcal_bench.evaluation.metrics import format_mean_std, rms
 from legcal_bench.files.atomic import atomic_write_text
 from legcal_bench.files.plots import pyplot, save_figure
 from legcal_bench.paper import HELDOUT_FOOT_HEIGHT_MM
@@ -252,20 +252,16 @@ def _closed_loop(root: Path) -> list[str]:
               "of uncorrected |", "|---|---:|---:|---:|---:|---:|"]
         for name, v in sorted(s["variants"].items()):
             ratio = "–" if v["corrected_over_uncorrected"] is None else f"{100 * v['corrected_over_uncorrected']:.2f} %"
-            L.append(f"| {name} | {v['upright']}/{v['trials']} | {_stat_pm(v['recovery_rms_deg'], 4)} | "
-                     f"{_stat_pm(v['foot_strike_rms_mm'], 1)} | {_stat_pm(v['pelvis_rms_mm'], 1)} | {ratio} |")
+            L.append(f"| {name} | {v['upright']}/{v['trials']} | {format_mean_std(v['recovery_rms_deg'], 4)} | "
+                     f"{format_mean_std(v['foot_strike_rms_mm'], 1)} | {format_mean_std(v['pelvis_rms_mm'], 1)} | {ratio} |")
         for name in ("uncorrected", "oracle"):
             r = c[name]
-            L.append(f"| *{name}* | {r['upright']}/{r['trials']} | – | {_stat_pm(r['foot_strike_rms_mm'], 1)} | "
-                     f"{_stat_pm(r['pelvis_rms_mm'], 1)} | – |")
+            L.append(f"| *{name}* | {r['upright']}/{r['trials']} | – | {format_mean_std(r['foot_strike_rms_mm'], 1)} | "
+                     f"{format_mean_std(r['pelvis_rms_mm'], 1)} | – |")
         sp = s["nominal_spread"]
-        L += [f"| *nominal seed-to-seed spread* | – | – | {_stat_pm(sp['foot_strike_rms_mm'], 1)} | "
-              f"{_stat_pm(sp['pelvis_rms_mm'], 1)} | – |", ""]
+        L += [f"| *nominal seed-to-seed spread* | – | – | {format_mean_std(sp['foot_strike_rms_mm'], 1)} | "
+              f"{format_mean_std(sp['pelvis_rms_mm'], 1)} | – |", ""]
     return L
-
-
-def _stat_pm(v: dict | None, nd: int) -> str:
-    return "–" if not v else f"{v['mean']:.{nd}f} ± {v['std']:.{nd}f}"
 
 
 def generate(root: str | Path = "leaderboard") -> str:

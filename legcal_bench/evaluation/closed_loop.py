@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from legcal_bench.evaluation.metrics import rms
+from legcal_bench.evaluation.metrics import mean_std, rms
 from legcal_bench.evaluation.walk import deviation, trial_offsets, walk
 
 CONDITIONS = ("nominal", "uncorrected", "corrected", "oracle")
@@ -147,48 +147,43 @@ def trial_odometry(legmap, nominal, dq: np.ndarray, dq_hat: np.ndarray) -> dict:
     return out
 
 
-def _stat(values) -> dict | None:
-    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
-    return {"mean": float(v.mean()), "std": float(v.std()), "n": int(v.size)} if v.size else None
-
-
 def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
     """Mean +- std over trials per condition, and the ratios the paper reports."""
     conds = {}
     for c in CONDITIONS:
         rows = [t[c] for t in trials]
         conds[c] = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
-                    "time_to_fall_s": _stat([r["fallen_at"] for r in rows if r["fallen_at"] is not None]),
-                    "torque_mean": _stat([r["torque_mean"] for r in rows]),
-                    "power_mean": _stat([r["power_mean"] for r in rows])}
+                    "time_to_fall_s": mean_std([r["fallen_at"] for r in rows if r["fallen_at"] is not None]),
+                    "torque_mean": mean_std([r["torque_mean"] for r in rows]),
+                    "power_mean": mean_std([r["power_mean"] for r in rows])}
         if c != "nominal":
             for k in ("foot_strike_rms_mm", "pelvis_rms_mm"):
-                conds[c][k] = _stat([r.get(k) for r in rows])
+                conds[c][k] = mean_std([r.get(k) for r in rows])
     ratios = {}
     for k in ("foot_strike_rms_mm", "pelvis_rms_mm"):
         u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else np.nan for c in ("uncorrected", "corrected", "oracle"))
         ratios[k] = {"corrected_over_uncorrected": float(cor / u), "corrected_over_oracle": float(cor / ora)}
-    spread = {k: _stat([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
+    spread = {k: mean_std([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
     variants = {}
     for label in (trials[0]["variants"] if trials else {}):
         rows = [t["variants"][label] for t in trials]
         v = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
-             "recovery_rms_deg": _stat([r["recovery_rms_deg"] for r in rows]),
-             **{k: _stat([r.get(k) for r in rows]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}}
+             "recovery_rms_deg": mean_std([r["recovery_rms_deg"] for r in rows]),
+             **{k: mean_std([r.get(k) for r in rows]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}}
         unc = conds["uncorrected"]["foot_strike_rms_mm"]
         v["corrected_over_uncorrected"] = (v["foot_strike_rms_mm"]["mean"] / unc["mean"]
                                            if v["foot_strike_rms_mm"] and unc else None)
         variants[label] = v
-    odometry = {name: {k: _stat([t["odometry"][name][k] for t in trials]) for k in ODOMETRY_KEYS}
+    odometry = {name: {k: mean_std([t["odometry"][name][k] for t in trials]) for k in ODOMETRY_KEYS}
                 for name in ("no_offsets", "before", "after")}
-    odometry["pitch_m_per_deg"] = _stat([t["odometry"]["pitch"]["m_per_deg"] for t in trials])
-    odometry["distance_m"] = _stat([t["odometry"]["pitch"]["distance_m"] for t in trials])
+    odometry["pitch_m_per_deg"] = mean_std([t["odometry"]["pitch"]["m_per_deg"] for t in trials])
+    odometry["distance_m"] = mean_std([t["odometry"]["pitch"]["distance_m"] for t in trials])
     odometry["contact_point"] = trials[0]["odometry"]["contact_point"] if trials else None
     return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread, "odometry": odometry,
             "variants": variants,
-            "recovery_rms_deg": _stat([t["recovery_rms_deg"] for t in trials]),
-            "static_s": _stat([t["static_s"] for t in trials]),
-            "walk_s": _stat([t[c]["wall_s"] for t in trials for c in CONDITIONS]),
+            "recovery_rms_deg": mean_std([t["recovery_rms_deg"] for t in trials]),
+            "static_s": mean_std([t["static_s"] for t in trials]),
+            "walk_s": mean_std([t[c]["wall_s"] for t in trials for c in CONDITIONS]),
             "privileged": trials[0]["privileged"] if trials else []}
 
 

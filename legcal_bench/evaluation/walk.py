@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from legcal_bench.evaluation.metrics import rms
+from legcal_bench.evaluation.metrics import mean_std, rms
 from legcal_bench.robots.legmap import SIDES
 
 
@@ -136,11 +136,8 @@ def walk_trials(env, runner, offsets: str, trials: int, seconds: float = 20.0, c
     up = sum(r["offsets"]["upright"] for r in rows)
     both = [r for r in rows if "pelvis_rms_mm" in r]
 
-    def stat(key):
-        v = np.array([r[key] for r in both], dtype=float)
-        return {"mean": float(np.mean(v)), "std": float(np.std(v))} if len(v) else None
-
     return {"offsets": offsets, "trials": trials, "seconds": seconds, "upright_nominal": up_nom, "upright": up,
-            "pelvis_rms_mm": stat("pelvis_rms_mm"), "foot_strike_rms_mm": stat("foot_strike_rms_mm"),
+            "pelvis_rms_mm": mean_std([r["pelvis_rms_mm"] for r in both]),
+            "foot_strike_rms_mm": mean_std([r["foot_strike_rms_mm"] for r in both]),
             "wall_s_per_walk": float(np.mean([r[k]["wall_s"] for r in rows for k in ("nominal", "offsets")])),
             "privileged": runner.spec.privileged, "rows": rows}

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.evaluation.closed_loop import CONDITIONS
+from legcal_bench.evaluation.metrics import format_mean_std
 from legcal_bench.files.plots import pyplot, save_figure
 from legcal_bench.files.reports import write_report
 from legcal_bench.paper import (CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_OFFSET_DEG, CLOSED_LOOP_PELVIS_MM,
@@ -16,19 +17,15 @@ from legcal_bench.paper import (CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_OFFSET_D
 COLOURS = {"nominal": "black", "uncorrected": "tab:red", "corrected": "tab:blue", "oracle": "tab:green"}
 
 
-def _pm(s, nd=0) -> str:
-    return "–" if not s else f"{s['mean']:.{nd}f} ± {s['std']:.{nd}f}"
-
-
 def table(summary: dict) -> list[str]:
     c = summary["conditions"]
     L = ["| condition | upright | foot-strike RMS dev (mm) | pelvis RMS dev (mm) | time to fall (s) | mean torque (N m) | "
          "mean power (W) |", "|---|---:|---:|---:|---:|---:|---:|"]
     for name in CONDITIONS:
         r = c[name]
-        L.append(f"| {name} | {r['upright']}/{r['trials']} | {_pm(r.get('foot_strike_rms_mm'), 1)} | "
-                 f"{_pm(r.get('pelvis_rms_mm'), 1)} | {_pm(r['time_to_fall_s'], 2)} | {_pm(r['torque_mean'], 2)} | "
-                 f"{_pm(r['power_mean'], 1)} |")
+        L.append(f"| {name} | {r['upright']}/{r['trials']} | {format_mean_std(r.get('foot_strike_rms_mm'), 1)} | "
+                 f"{format_mean_std(r.get('pelvis_rms_mm'), 1)} | {format_mean_std(r['time_to_fall_s'], 2)} | {format_mean_std(r['torque_mean'], 2)} | "
+                 f"{format_mean_std(r['power_mean'], 1)} |")
     return L
 
 
@@ -46,9 +43,9 @@ def odometry_table(summary: dict) -> list[str]:
                               ("total_mm", "total 3-D", LIDAR_RMS_MM["total_3d"])):
         b, a = o["before"][key], o["after"][key]
         red = f"{100 * (1 - a['mean'] / b['mean']):.1f} %" if b and a else "–"
-        L.append(f"| {label} | {_pm(o['no_offsets'][key])} | {_pm(b)} | {_pm(a)} | {red} | {paper[0]} → {paper[1]} |")
+        L.append(f"| {label} | {format_mean_std(o['no_offsets'][key])} | {format_mean_std(b)} | {format_mean_std(a)} | {red} | {paper[0]} → {paper[1]} |")
     L += ["", f"Vertical drift per degree of symmetric hip-pitch offset (final height error, least squares over "
-          f"-3..3 deg): {_pm(o['pitch_m_per_deg'], 3)} m/deg over {_pm(o['distance_m'], 1)} m walked, i.e. one "
+          f"-3..3 deg): {format_mean_std(o['pitch_m_per_deg'], 3)} m/deg over {format_mean_std(o['distance_m'], 1)} m walked, i.e. one "
           f"degree's tangent times the distance (paper: {LIDAR_VERTICAL_DRIFT_M_PER_DEG} m/deg over its walks)."]
     return L
 
@@ -92,10 +89,10 @@ def write(out: str | Path, summaries: list[dict], trials: list[list[dict]], code
               f"{r['foot_strike_rms_mm']['corrected_over_oracle']:.2f}x, pelvis "
               f"{r['pelvis_rms_mm']['corrected_over_oracle']:.2f}x (the oracle repeats the nominal walk up to rounding). "
               f"Nominal seed-to-seed spread (other noise and jitter): foot strike "
-              f"{_pm(s['nominal_spread']['foot_strike_rms_mm'], 1)} mm, pelvis {_pm(s['nominal_spread']['pelvis_rms_mm'], 1)} "
+              f"{format_mean_std(s['nominal_spread']['foot_strike_rms_mm'], 1)} mm, pelvis {format_mean_std(s['nominal_spread']['pelvis_rms_mm'], 1)} "
               f"mm. Static recovery RMS "
-              f"{_pm(s['recovery_rms_deg'], 4)} deg; per trial: static collection + calibration "
-              f"{_pm(s['static_s'], 2)} s, a walk {_pm(s['walk_s'], 2)} s wall.", "",
+              f"{format_mean_std(s['recovery_rms_deg'], 4)} deg; per trial: static collection + calibration "
+              f"{format_mean_std(s['static_s'], 2)} s, a walk {format_mean_std(s['walk_s'], 2)} s wall.", "",
               f"![pelvis paths]({png.name})"]
         L += ["", *odometry_table(s)]
     fs, pv = CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_PELVIS_MM
