@@ -14,6 +14,7 @@ from a policy using a privileged term says so (`PolicySpec.privileged`).
   last_action   n   the policy's previous output (zeros after reset)
   phase         2   sin, cos of 2 pi t / period (t: time since reset)
   foot_phase    2k  per foot i: sin, cos of 2 pi (t / period + offsets[i])
+  time          1   t, the time since reset (s): with `clip`, a start-up clock
 
 Each term's values are multiplied by its scale (one number or one per value) and then
 clipped to +-clip if given.
@@ -72,6 +73,7 @@ TERMS: dict[str, Term] = {
     "last_action": Term(lambda c, t: c.last_action if t.mask is None else c.last_action[t.mask_index],
                         lambda n, t: n if t.mask is None else len(t.mask), per_joint=True),
     "phase": Term(lambda c, t: _phase(c, t, [0.0]), lambda n, t: 2, needs_period=True),
+    "time": Term(lambda c, t: np.array([c.time]), lambda n, t: 1),
     "foot_phase": Term(lambda c, t: _phase(c, t, t.offsets), lambda n, t: 2 * len(t.offsets), needs_period=True),
 }
 

@@ -44,6 +44,10 @@ class PolicyRunner:
         self.command = np.asarray(self.spec.command, dtype=float)
         self.last_action = np.zeros(len(self.spec.joints))
 
+    @property
+    def privileged(self) -> list[str]:
+        return self.spec.privileged
+
     def reset(self) -> None:
         self.last_action = np.zeros(len(self.spec.joints))
         self.model.reset()

@@ -1,16 +1,21 @@
-"""A model-based walker for robots without a policy of their own: footsteps, a ZMP
-reference, the CoM from ZMP preview control, swing-foot arcs, and the joint targets by
-closed-chain IK (issue #14, started: open loop, no feedback yet).
+"""The model-based walker, the teacher of our walking policies (issue #14): footsteps,
+a ZMP reference, the CoM from ZMP preview control, swing-foot arcs, joint targets by
+closed-chain IK, and balance feedback on the IMU.
 
 The gait: from a standing squat (`GaitParams.depth` below straight legs), steps of
 `step_length` every `step_period`, the right foot first; each step begins with a double
 support share in which the ZMP shifts to the stance foot, then the swing foot travels
 on a cycloid (`lift` high). The CoM follows the ZMP through `zmp_preview.track` (height:
 the pelvis's), the pelvis is the CoM less its offset at the starting pose, and the
-joint targets come from `posture_ik` with both soles where the plan puts them, so the
-targets always close the chain. Open loop, it walks the A3-like robot when the encoders
-are right and falls within seconds with `paper@1` (measured by the test and
-`legcal-bench walk`): feedback on the IMU and stiffer ankles come next.
+joint targets come from one batch of closed-chain IK with both soles where the plan
+puts them (`joint_targets`), computed once per walker.
+
+`ZmpWalker` adds `Feedback`: the torso's roll and pitch from the IMU filter's gravity
+direction (optionally less their slow mean) and the gyro's rate, turned into ankle
+roll/pitch and hip roll/pitch corrections on each leg in proportion to its share of the
+load (ankle force/torque where the robot has it, else the plan's stance). It reads only
+the robot's sensors. `TeacherRecipe` (a `legcal-teacher/1` YAML file; the built-in
+robots' are in policies/teachers/) holds a robot's gait, feedback and rates.
 """
 
 from __future__ import annotations
@@ -19,7 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from legcal_bench.geometry.poses import pose_xyz_rpy
+from legcal_bench.geometry.lie import inverse
+from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
 from legcal_bench.policies.zmp_preview import preview_gains, track
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.double_support import posture_ik
@@ -89,9 +95,141 @@ def joint_targets(kin: LegKinematics, gait: Gait, p: GaitParams = GaitParams()) 
     q = posture_ik(kin, pose_xyz_rpy(gait.left[0], [0, 0, 0]), pose_xyz_rpy(gait.right[0], [0, 0, 0]), postures[:1])[0]
     com = kin.com(q)  # the CoM in the pelvis frame at the starting pose
     postures[:, 0], postures[:, 1] = cx[:, 0] + p.com_x_bias - com[0], cy[:, 0] - com[1]
-    Q = np.empty((len(gait.time), 12))
-    for k in range(len(gait.time)):
-        q = posture_ik(kin, pose_xyz_rpy(gait.left[k], [0, 0, 0]), pose_xyz_rpy(gait.right[k], [0, 0, 0]),
-                       postures[k:k + 1], q)[0]
-        Q[k] = q
-    return Q
+    # One batch: every frame's soles in the pelvis frame, Newton from the starting pose.
+    T_BW = inverse(posture_poses(postures))
+    flat = lambda P: np.broadcast_to(np.eye(4), (len(P), 4, 4)).copy()  # noqa: E731
+    H = {}
+    for side, P in (("left", gait.left), ("right", gait.right)):
+        H[side] = flat(P)
+        H[side][:, :3, 3] = P
+    return kin.solve_batch(T_BW @ H["left"], T_BW @ H["right"], q)
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """The teacher's balance feedback: torso attitude (from the IMU's gravity direction
+    and the gyro) turned into ankle and hip-roll corrections on the loaded leg(s)."""
+
+    roll_p: float = 1.0  # rad of stance ankle roll per rad of torso roll
+    roll_d: float = 0.05  # ... per rad/s of roll rate
+    pitch_p: float = 0.5  # rad of stance ankle pitch per rad of torso pitch
+    pitch_d: float = 0.02
+    hip_roll_p: float = 0.0  # rad of stance hip roll per rad of torso roll
+    hip_pitch_p: float = 0.0  # rad of stance hip pitch per rad of torso pitch
+    tilt_tau: float = 0.0  # s; > 0: feed back the tilt minus its slow mean (time constant)
+
+
+class ZmpWalker:
+    """The model-based teacher: the gait plan's joint targets (`joint_targets`, computed
+    once) plus `Feedback` on the IMU, applied to each leg in proportion to its share of
+    the measured load (ankle force/torque where the robot has it, else the plan's
+    stance). Same interface as `PolicyRunner`: `reset()`, `act(obs, info, time)`."""
+
+    def __init__(self, legmap, seconds: float, gait: GaitParams = GaitParams(), feedback: Feedback = Feedback()):
+        kin = LegKinematics(legmap)
+        self.gait, self.feedback = gait, feedback
+        n_steps = int(np.ceil(max(seconds - gait.start_s, 0.0) / gait.step_period)) + 2
+        self.plan = plan_gait(kin, n_steps, gait)
+        self.Q = joint_targets(kin, self.plan, gait)
+        roles = list(legmap.joint_roles)
+        axes = kin.joint_axes(self.Q[0])
+        self.idx = {}
+        for leg, side in ((range(6), "left"), (range(6, 12), "right")):
+            self.idx[side] = {roles[i]: i for i in leg}
+        sign = lambda i, c: float(np.sign(axes[i, c]) or 1.0)  # noqa: E731
+        self.sign = {s: {"ankle_roll": sign(self.idx[s]["ankle_roll"], 0), "ankle_pitch": sign(self.idx[s]["ankle_pitch"], 1),
+                         "hip_roll": sign(self.idx[s]["hip_roll"], 0), "hip_pitch": sign(self.idx[s]["hip_pitch"], 1)} for s in ("left", "right")}
+        self.planned_load = np.stack([(self.plan.right[:, 2] > 1e-9) | (self.plan.left[:, 2] <= 1e-9),
+                                      (self.plan.left[:, 2] > 1e-9) | (self.plan.right[:, 2] <= 1e-9)], 1).astype(float)
+        self.default_q = self.Q[0]
+        self.reset()
+
+    privileged: list = []  # it reads only the robot's own sensors
+
+    def reset(self) -> None:
+        self._slow = np.zeros(2)
+
+    def act(self, obs: dict, info: dict, time: float) -> np.ndarray:
+        p, f = self.gait, self.feedback
+        k = min(int(round(time / p.dt)), len(self.Q) - 1)
+        q = self.Q[k].copy()
+        g, w = obs["gravity"], obs["ang_vel"]
+        tilt = np.array([np.arctan2(-g[1], -g[2]), np.arcsin(np.clip(g[0], -1, 1))])
+        if f.tilt_tau > 0:
+            self._slow += (tilt - self._slow) * min(p.dt / f.tilt_tau, 1.0)
+            tilt = tilt - self._slow
+        if "ft" in obs:
+            load = np.linalg.norm(obs["ft"][:, :3], axis=1)
+        else:
+            load = self.planned_load[k]
+        share = load / max(load.sum(), 1e-9)
+        for j, side in enumerate(("left", "right")):
+            i, s = self.idx[side], self.sign[side]
+            q[i["ankle_roll"]] += share[j] * s["ankle_roll"] * (f.roll_p * tilt[0] + f.roll_d * w[0])
+            q[i["ankle_pitch"]] += share[j] * s["ankle_pitch"] * (f.pitch_p * tilt[1] + f.pitch_d * w[1])
+            q[i["hip_roll"]] += share[j] * s["hip_roll"] * f.hip_roll_p * tilt[0]
+            q[i["hip_pitch"]] += share[j] * s["hip_pitch"] * f.hip_pitch_p * tilt[1]
+        return q
+
+
+TEACHER_FORMAT = "legcal-teacher/1"
+
+
+@dataclass(frozen=True)
+class TeacherRecipe:
+    """The teacher for one robot: its gait, its feedback and its rates (a YAML file,
+    `format: legcal-teacher/1`, with sections `gait` (GaitParams fields), `feedback`
+    (Feedback fields) and `rates` {physics_hz, control_hz}; `dt` follows control_hz)."""
+
+    gait: GaitParams
+    feedback: Feedback
+    physics_hz: float = 500.0
+    control_hz: float = 100.0
+    path: str | None = None
+
+
+def load_teacher_recipe(path) -> TeacherRecipe:
+    """Read and check a teacher recipe; ConfigError naming the field and the fix."""
+    from pathlib import Path
+
+    import yaml
+
+    from legcal_bench.errors import ConfigError
+
+    path = Path(path)
+    where = f"teacher recipe {path}"
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError) as e:
+        raise ConfigError(f"{where}: not a readable YAML file ({e})") from None
+    if not isinstance(doc, dict) or doc.get("format") != TEACHER_FORMAT:
+        raise ConfigError(f"{where}: field 'format' must be {TEACHER_FORMAT!r} (see policies/teachers/)")
+    unknown = set(doc) - {"format", "robot", "gait", "feedback", "rates", "notes"}
+    if unknown:
+        raise ConfigError(f"{where}: unknown fields {sorted(unknown)}; known: format, robot, gait, feedback, rates, "
+                          "notes")
+    rates = doc.get("rates") or {}
+    try:
+        physics_hz, control_hz = float(rates.get("physics_hz", 500.0)), float(rates.get("control_hz", 100.0))
+    except (TypeError, ValueError):
+        raise ConfigError(f"{where}: rates.physics_hz and rates.control_hz must be numbers (Hz)") from None
+    if control_hz <= 0 or physics_hz < control_hz or abs(physics_hz / control_hz - round(physics_hz / control_hz)) > 1e-9:
+        raise ConfigError(f"{where}: rates: physics_hz must be a whole multiple of control_hz > 0")
+    parts = {}
+    for section, cls in (("gait", GaitParams), ("feedback", Feedback)):
+        values = doc.get(section) or {}
+        if not isinstance(values, dict):
+            raise ConfigError(f"{where}: '{section}' must be a mapping of {cls.__name__} fields")
+        bad = set(values) - set(cls.__dataclass_fields__) - ({"dt"} if section == "gait" else set())
+        if bad:
+            raise ConfigError(f"{where}: {section}: unknown fields {sorted(bad)}; known: "
+                              f"{sorted(set(cls.__dataclass_fields__) - {'dt'})}")
+        if not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in values.values()):
+            raise ConfigError(f"{where}: {section}: every value must be a finite number")
+        parts[section] = cls(**{k: float(v) for k, v in values.items() if k != "dt"},
+                             **({"dt": 1.0 / control_hz} if section == "gait" else {}))
+    g = parts["gait"]
+    if not (0 < g.double_support < 1 and g.step_period > 0 and g.step_length >= 0 and g.lift > 0 and 0 < g.depth < 1):
+        raise ConfigError(f"{where}: gait: need step_period > 0, step_length >= 0, lift > 0, 0 < double_support < 1, "
+                          "0 < depth < 1")
+    return TeacherRecipe(parts["gait"], parts["feedback"], physics_hz, control_hz, str(path))

@@ -137,6 +137,65 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     return 0
 
 
+POLICIES_DIR = __import__("pathlib").Path(__file__).resolve().parents[2] / "policies"
+
+
+def cmd_train_policy(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.evaluation.distill import DistillConfig, export, train
+    from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
+    from legcal_bench.policies.zmp_walker import load_teacher_recipe
+    from legcal_bench.provenance import code_version, describe
+    from legcal_bench.robots import BUILTIN, load_robot
+
+    legmap = load_robot(a.robot, a.mjcf)
+    teacher = a.teacher
+    if teacher is None:
+        if a.robot not in BUILTIN or not (POLICIES_DIR / "teachers" / f"{a.robot}.yaml").is_file():
+            raise ConfigError(f"--teacher: robot {a.robot!r} has no built-in teacher recipe; write one (see "
+                              f"{POLICIES_DIR / 'teachers'}, format legcal-teacher/1) and pass --teacher FILE")
+        teacher = POLICIES_DIR / "teachers" / f"{a.robot}.yaml"
+    recipe = load_teacher_recipe(teacher)
+    if a.iterations < 1 or a.rollouts < 1:
+        raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
+    cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed)
+    name = a.name or f"legcal_{legmap.name}_walker"
+    out = Path(a.out or POLICIES_DIR / "walkers" / str(a.robot))
+    made_by = (f"legcal-bench train-policy --robot {a.robot} --teacher {teacher} --iterations {a.iterations} "
+               f"--rollouts {a.rollouts} --offsets-deg {a.offsets_deg:g} --seed {a.seed}")
+    code = describe(code_version())
+    lines = []
+
+    def log(rec):
+        lines.append(json.dumps(rec, default=float))
+        if a.quiet:
+            return
+        print(f"iteration {rec['iteration']}: beta {rec['beta']:.3f}, {rec['samples']} samples, rollout falls "
+              f"{rec['rollout_falls']}, val loss {rec['val_loss']:.4f}, student upright {rec['eval_upright']}/"
+              f"{rec['eval_total']} (mean {rec['eval_mean_upright_s']:.1f} s), {rec['elapsed_s']:.0f} s", flush=True)
+
+    student, spec, history = train(legmap, recipe, cfg, name, log, progress=not a.quiet)
+
+    def write(folder: Path) -> None:
+        import shutil
+
+        shutil.copyfile(teacher, folder / "teacher.yaml")
+        notes = {"made_by": made_by, "code": code, "teacher": "teacher.yaml",
+                 "selected_iteration": history["selected_iteration"],
+                 "train_seconds": round(history["train_seconds"], 1)}
+        export(student, spec, folder, notes)
+        atomic_write_text(folder / "train.log", "\n".join(lines) + "\n")
+        atomic_write_json(folder / "training.json", {**history, "made_by": made_by, "code": code,
+                                                     "robot": legmap.name, "name": name})
+
+    replace_dir(out, write, keep_if=lambda p: (p / "training.json").is_file())
+    print(f"trained in {history['train_seconds']:.0f} s; selected iteration {history['selected_iteration']}; "
+          f"wrote {out}/policy.yaml (TorchScript) and {out}/policy.onnx.yaml (ONNX)")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.sim.offsets import PRESETS_HELP
 
@@ -180,3 +239,19 @@ def add_commands(sub) -> None:
     e.add_argument("--out", default="reports/walk_eval", help="report folder (markdown, its JSON, plots)")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_walk_eval)
+
+    t = sub.add_parser("train-policy", help="train our walking policy from scratch: the model-based teacher "
+                                            "(ZMP preview gait + IMU balance feedback) distilled into an MLP by "
+                                            "behaviour cloning and DAgger, checkpoint chosen by rollout success")
+    robot_args(t)
+    t.add_argument("--teacher", default=None, help="teacher recipe YAML (format legcal-teacher/1; default: "
+                                                   "policies/teachers/<robot>.yaml for a built-in robot)")
+    t.add_argument("--iterations", type=int, default=7, help="DAgger iterations (the first is behaviour cloning)")
+    t.add_argument("--rollouts", type=int, default=16, help="20 s rollouts per iteration")
+    t.add_argument("--offsets-deg", type=float, default=3.0, help="training offsets: uniform +- this per joint")
+    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--name", default=None, help="the policy's name in its spec")
+    t.add_argument("--out", default=None, help="output folder (default policies/walkers/<robot>); replaced only "
+                                               "if it holds an earlier training result")
+    t.add_argument("--quiet", action="store_true")
+    t.set_defaults(func=cmd_train_policy)

@@ -104,7 +104,7 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
     spread = walk(env, runner, cfg.seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
     out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": dq_hat.tolist(),
            "recovery_rms_deg": float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
-           "calibration_warnings": result.warnings, "privileged": runner.spec.privileged}
+           "calibration_warnings": result.warnings, "privileged": runner.privileged}
     for c, w in walks.items():
         row = {"upright": w.upright, "fallen_at": w.fallen_at, "torque_mean": w.torque_mean,
                "power_mean": w.power_mean, "wall_s": w.wall_s,

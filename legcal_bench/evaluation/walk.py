@@ -88,7 +88,7 @@ def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on
     steps = k + 1
     return Walk(seed, seconds, u.offsets.tolist(), u.correction.tolist(), t[:steps], pelvis[:steps],
                 u.sim.strikes.to_dict(), torque / steps, power / steps, info["fallen_at"], wall,
-                runner.spec.privileged, **{k: v[:steps] for k, v in logs.items()})
+                runner.privileged, **{k: v[:steps] for k, v in logs.items()})
 
 
 def deviation(a: Walk, nominal: Walk) -> dict:
@@ -140,4 +140,4 @@ def walk_trials(env, runner, offsets: str, trials: int, seconds: float = 20.0, c
             "pelvis_rms_mm": mean_std([r["pelvis_rms_mm"] for r in both]),
             "foot_strike_rms_mm": mean_std([r["foot_strike_rms_mm"] for r in both]),
             "wall_s_per_walk": float(np.mean([r[k]["wall_s"] for r in rows for k in ("nominal", "offsets")])),
-            "privileged": runner.spec.privileged, "rows": rows}
+            "privileged": runner.privileged, "rows": rows}
