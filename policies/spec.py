@@ -36,6 +36,7 @@ import numpy as np
 from legcal_bench.errors import ConfigError
 
 SPEC_FORMAT = "legcal-policy/1"
+WALKERS_DIR = Path(__file__).resolve().parent / "walkers"  # our own policies: walkers/<robot>/policy.yaml
 MODEL_FORMATS = ("torchscript", "torch.export", "onnx")
 
 
@@ -94,13 +95,30 @@ def _numbers(v, n: int | None, where: str, positive: bool = False) -> tuple[floa
     return tuple(float(x) for x in a)
 
 
+def builtin_policies() -> list[str]:
+    """Names of our own shipped policies (`--policy a3` = policies/walkers/a3/policy.yaml)."""
+    return sorted(p.parent.name for p in WALKERS_DIR.glob("*/policy.yaml"))
+
+
+def resolve_policy(path: str | Path) -> Path:
+    """A spec path, or the name of one of our shipped policies."""
+    p = Path(path)
+    if not p.exists() and len(p.parts) == 1 and (WALKERS_DIR / p.name / "policy.yaml").is_file():
+        return WALKERS_DIR / p.name / "policy.yaml"
+    return p
+
+
 def load_policy_spec(path: str | Path) -> PolicySpec:
-    """Read and check a spec; ConfigError naming the field and the fix."""
+    """Read and check a spec (a path, or a shipped policy's name); ConfigError naming
+    the field and the fix."""
     import yaml
 
     from legcal_bench.policies.observation import TERMS
 
-    path = Path(path)
+    path = resolve_policy(path)
+    if not path.is_file():
+        raise ConfigError(f"policy spec {path}: no such file; give a spec YAML or one of our policies "
+                          f"({', '.join(builtin_policies())})")
     try:
         doc = yaml.safe_load(path.read_text())
     except (OSError, yaml.YAMLError) as e:

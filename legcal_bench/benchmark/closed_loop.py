@@ -8,8 +8,9 @@ corrected by its own estimate against the same nominal, uncorrected and oracle w
 One result file per robot and pattern (`<root>/closed_loop/<robot>_<pattern>.json`),
 kept if its key (the evaluation's config and `RESULTS_VERSION`) matches.
 
-The A2-like and A3-like robots join when they have policies of their own (issue #14);
-until then the suite runs the G1 with its published policy.
+The suite `closed-loop` runs the A3-like and A2-like robots with our own policies
+(issue #14; `--policy a3` names policies/walkers/a3/policy.yaml); `closed-loop-full`
+adds the G1 with its published policy through its leg map and spec.
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, evaluate
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.provenance import RESULTS_VERSION, code_version, stable_hash
 
-CLOSED_LOOP_ROBOTS = {G1_EXAMPLE: "examples/unitree_g1.policy.yaml"}  # robot -> policy spec
+# robot -> its walking policy (a shipped policy's name, or a spec path relative to the checkout)
+CLOSED_LOOP_ROBOTS = {"a3": "a3", "a2": "a2", G1_EXAMPLE: "examples/unitree_g1.policy.yaml"}
 CLOSED_LOOP_OFFSETS = ("paper@3", "random:3")
 PRIMARY = ("interfoot", "sensor")  # the variant whose walks the report's "corrected" row shows
 RESULTS_DIR = "closed_loop"

@@ -43,7 +43,7 @@ def _bench_closed_loop(a: argparse.Namespace, suite) -> int:
     t0 = time.perf_counter()
     executor, client = make_executor(a.scheduler, a.workers)
     try:
-        files = run_closed_loop_suite(out, trials=a.seeds or suite.seeds, executor=executor, robots=a.robots,
+        files = run_closed_loop_suite(out, trials=a.seeds or suite.seeds, executor=executor, robots=a.robots or suite.robots,
                                       progress=not a.quiet)
     finally:
         executor.shutdown()

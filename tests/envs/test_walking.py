@@ -147,5 +147,5 @@ def test_walk_refuses_a_spec_for_another_robot_and_bad_offsets(capsys, tmp_path)
     assert main(["walk", "--robot", str(G1_LEGMAP), "--policy", str(G1_POLICY), "--offsets", "paper@99"]) == 2
     assert "must be in [0, 10] degrees" in capsys.readouterr().err
     assert main(["walk", "--robot", str(G1_LEGMAP), "--policy", "nowhere.yaml"]) == 2
-    assert "not a readable YAML file" in capsys.readouterr().err
+    assert "nowhere.yaml: no such file; give a spec YAML or one of our policies (a2, a3)" in capsys.readouterr().err
     assert main(["walk-eval", "--robot", str(G1_LEGMAP), "--policy", str(G1_POLICY), "--trials", "0"]) == 2
