@@ -91,6 +91,15 @@ def default_walking_config(legmap: LegMap) -> WalkingConfig:
     return WalkingConfig(kp=tuple(g.kp), kd=tuple(g.kd), default_q=tuple(q.tolist()), integrator="implicitfast")
 
 
+def teacher_walking_config(legmap: LegMap, recipe, walker) -> WalkingConfig:
+    """For the model-based teacher (`legcal_bench.policies.zmp_walker`): the `collect`
+    servo gains, its plan's first pose, its recipe's rates."""
+    from dataclasses import replace
+
+    return replace(default_walking_config(legmap), default_q=tuple(float(v) for v in walker.default_q),
+                   physics_dt=1.0 / recipe.physics_hz, decimation=int(round(recipe.physics_hz / recipe.control_hz)))
+
+
 def _correction(value, where: str) -> np.ndarray:
     if value is None:
         return np.zeros(12)

@@ -45,6 +45,10 @@ class PolicyRunner:
         self.last_action = np.zeros(len(self.spec.joints))
 
     @property
+    def name(self) -> str:
+        return self.spec.name
+
+    @property
     def privileged(self) -> list[str]:
         return self.spec.privileged
 

@@ -145,6 +145,7 @@ class ZmpWalker:
         self.reset()
 
     privileged: list = []  # it reads only the robot's own sensors
+    name = "zmp_teacher"
 
     def reset(self) -> None:
         self._slow = np.zeros(2)

@@ -29,17 +29,30 @@ def cmd_walk(a: argparse.Namespace) -> int:
 
     if a.seconds <= 0 or a.trials < 0:
         raise ConfigError(f"--seconds {a.seconds} / --trials {a.trials}: need seconds > 0 and trials >= 0")
-    env = WalkingEnv(robot=a.robot, policy=a.policy, sensors=a.sensors, mjcf=a.mjcf,
-                     render_mode="rgb_array" if a.strip else None, width=320, height=400)
-    runner = PolicyRunner(env.policy_spec, env.legmap)
+    if (a.policy is None) == (a.teacher is None):
+        raise ConfigError("give --policy SPEC (a policy) or --teacher RECIPE (the model-based teacher), not both")
+    render = dict(render_mode="rgb_array" if a.strip else None, width=320, height=400)
+    if a.teacher is not None:
+        from legcal_bench.envs.walking import teacher_walking_config
+        from legcal_bench.policies.zmp_walker import ZmpWalker, load_teacher_recipe
+        from legcal_bench.robots import load_robot
+
+        legmap, recipe = load_robot(a.robot, a.mjcf), load_teacher_recipe(a.teacher)
+        runner = ZmpWalker(legmap, a.seconds, recipe.gait, recipe.feedback)
+        env = WalkingEnv(robot=legmap, sensors=a.sensors, walking=teacher_walking_config(legmap, recipe, runner),
+                         **render)
+    else:
+        env = WalkingEnv(robot=a.robot, policy=a.policy, sensors=a.sensors, mjcf=a.mjcf, **render)
+        runner = PolicyRunner(env.policy_spec, env.legmap)
     correction = _correction(a.correction, env.legmap)
     code = describe(code_version())
-    made_by = (f"legcal-bench walk --robot {a.robot} --policy {a.policy} --offsets {a.offsets} --seconds {a.seconds:g} "
+    who = f"--policy {a.policy}" if a.policy is not None else f"--teacher {a.teacher}"
+    made_by = (f"legcal-bench walk --robot {a.robot} {who} --offsets {a.offsets} --seconds {a.seconds:g} "
                f"--sensors {a.sensors}" + (f" --trials {a.trials}" if a.trials else f" --seed {a.seed}")
                + (f" --correction {a.correction}" if a.correction else ""))
     if a.trials:
         out = walk_trials(env, runner, a.offsets, a.trials, a.seconds, correction, progress=not a.json)
-        out.update(code=code, made_by=made_by, robot=env.legmap.name, policy=runner.spec.name)
+        out.update(code=code, made_by=made_by, robot=env.legmap.name, policy=runner.name)
         if a.out:
             from legcal_bench.files.atomic import atomic_write_json
 
@@ -47,7 +60,7 @@ def cmd_walk(a: argparse.Namespace) -> int:
         if a.json:
             print(json.dumps(out, indent=2, default=float))
             return 0
-        print(f"{env.legmap.name}, policy {runner.spec.name}, {a.trials} trials x {a.seconds:g} s, offsets {a.offsets}, "
+        print(f"{env.legmap.name}, policy {runner.name}, {a.trials} trials x {a.seconds:g} s, offsets {a.offsets}, "
               f"sensors {a.sensors} ({code})")
         priv = f"; privileged observation terms: {', '.join(out['privileged'])}" if out["privileged"] else ""
         print(f"  upright: nominal {out['upright_nominal']}/{a.trials}, with offsets {out['upright']}/{a.trials}{priv}")
@@ -67,7 +80,7 @@ def cmd_walk(a: argparse.Namespace) -> int:
 
     dq = trial_offsets(a.offsets, env.legmap, a.seed)
     w = walk(env, runner, a.seconds, a.seed, {"offsets": dq, "correction": correction}, on_step=grab)
-    s = {**w.summary(), "code": code, "made_by": made_by, "robot": env.legmap.name, "policy": runner.spec.name}
+    s = {**w.summary(), "code": code, "made_by": made_by, "robot": env.legmap.name, "policy": runner.name}
     if a.strip and frames:
         from legcal_bench.reports.walking import write_strip
 
@@ -80,7 +93,7 @@ def cmd_walk(a: argparse.Namespace) -> int:
         print(json.dumps(s, indent=2, default=float))
         return 0
     state = "upright" if w.upright else f"FELL at {w.fallen_at:.2f} s"
-    print(f"{env.legmap.name}, policy {runner.spec.name}, seed {a.seed}, offsets {a.offsets} "
+    print(f"{env.legmap.name}, policy {runner.name}, seed {a.seed}, offsets {a.offsets} "
           f"(max {np.degrees(np.abs(dq)).max():.2f} deg): {state}; walked {s['distance_m']:.2f} m in "
           f"{s['duration_s']:.1f} s, strikes L/R {s['strike_counts']['left']}/{s['strike_counts']['right']}, mean "
           f"torque {w.torque_mean:.1f} N m, power {w.power_mean:.0f} W; {w.wall_s:.2f} s wall ({code})")
@@ -202,8 +215,10 @@ def add_commands(sub) -> None:
     w = sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional "
                                     "correction: one walk, or paired trials against the nominal walk")
     robot_args(w)
-    w.add_argument("--policy", required=True, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
-                                                   "examples/unitree_g1.policy.yaml)")
+    w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
+                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2)")
+    w.add_argument("--teacher", default=None, help="instead of a policy: the model-based teacher from its recipe "
+                                                   "(e.g. policies/teachers/a3.yaml)")
     w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "
                                                      "random:<deg> draws one pattern per seed")
     w.add_argument("--correction", default=None, help="a calibration result JSON: its offsets are applied as the "

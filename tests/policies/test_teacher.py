@@ -4,7 +4,6 @@ feedback reading only the robot's sensors."""
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,14 +39,14 @@ def test_a_recipe_is_checked_field_by_field(tmp_path):
 
 @pytest.mark.parametrize("robot", ["a3", "a2"])
 def test_the_built_in_teacher_walks_forward_upright(robot):
-    from legcal_bench.envs.walking import WalkingEnv, default_walking_config
+    from legcal_bench.envs.walking import WalkingEnv, teacher_walking_config
     from legcal_bench.evaluation.walk import walk
 
     lm = load_robot(robot)
     recipe = load_teacher_recipe(TEACHERS / f"{robot}.yaml")
     teacher = ZmpWalker(lm, 6.0, recipe.gait, recipe.feedback)
-    cfg = replace(default_walking_config(lm), default_q=tuple(teacher.Q[0]),
-                  decimation=int(round(recipe.physics_hz / recipe.control_hz)), physics_dt=1 / recipe.physics_hz)
+    cfg = teacher_walking_config(lm, recipe, teacher)
+    assert cfg.control_dt == pytest.approx(recipe.gait.dt)  # the plan's samples are the control steps
     env = WalkingEnv(robot=lm, sensors="realistic", walking=cfg)
     w = walk(env, teacher, 6.0, seed=1)
     assert w.upright
@@ -65,3 +64,15 @@ def test_the_built_in_teacher_walks_forward_upright(robot):
     roll = [i for i, r in enumerate(lm.joint_roles) if r in ("hip_roll", "ankle_roll")]
     assert np.abs(d[[i for i in roll if i < 6]]).max() > 0.01 and np.abs(d[[i for i in roll if i >= 6]]).max() > 0.01
     assert np.abs(np.delete(d, roll + [i for i, r in enumerate(lm.joint_roles) if "pitch" in r])).max() == 0
+
+
+def test_walk_runs_the_teacher_from_its_recipe(capsys):
+    from legcal_bench.cli import main
+
+    assert main(["walk", "--robot", "a3", "--teacher", str(TEACHERS / "a3.yaml"), "--seconds", "2", "--json"]) == 0
+    import json
+
+    s = json.loads(capsys.readouterr().out)
+    assert s["policy"] == "zmp_teacher" and s["upright"] and "--teacher" in s["made_by"]
+    assert main(["walk", "--robot", "a3", "--seconds", "2"]) == 2
+    assert "--policy SPEC" in capsys.readouterr().err
