@@ -261,6 +261,11 @@ def _closed_loop(root: Path) -> list[str]:
         sp = s["nominal_spread"]
         L += [f"| *nominal seed-to-seed spread* | – | – | {format_mean_std(sp['foot_strike_rms_mm'], 1)} | "
               f"{format_mean_std(sp['pelvis_rms_mm'], 1)} | – |", ""]
+        failed = s.get("static_failed") or {}
+        if failed.get("count"):
+            L += [f"{failed['count']} trial(s) (seeds {failed['seeds']}) have no calibration: the robot could not "
+                  "hold the static session set with their offsets, so no variant walks them (they count in the "
+                  "uncorrected and oracle rows).", ""]
     return L
 
 

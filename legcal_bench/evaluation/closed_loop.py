@@ -80,31 +80,37 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
     from legcal_bench.envs.walking import WalkingEnv
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.errors import HoldError
     from legcal_bench.robots import load_robot
 
     legmap = load_robot(cfg.robot, cfg.mjcf)
     dq = trial_offsets(cfg.offsets, legmap, seed)
     t0 = time.perf_counter()
-    with tempfile.TemporaryDirectory() as tmp:
-        collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
-                              sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
-                tmp, progress=False)
-        recs = load_session(tmp, robot=legmap)
-        result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, recs)
-        others = {label: get_calibrator(name, **dict(opts)).calibrate(legmap, recs).offsets_vector(legmap.joint_names)
-                  for label, name, opts in cfg.variants}
-    dq_hat = result.offsets_vector(legmap.joint_names)
+    failed = None  # a static session set the robot could not hold: no estimate to walk with
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
+                                  sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
+                    tmp, progress=False)
+            recs = load_session(tmp, robot=legmap)
+            result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, recs)
+            others = {label: get_calibrator(name, **dict(opts)).calibrate(legmap, recs).offsets_vector(
+                legmap.joint_names) for label, name, opts in cfg.variants}
+    except HoldError as e:
+        failed = str(e)
+    dq_hat = None if failed else result.offsets_vector(legmap.joint_names)
     static_s = time.perf_counter() - t0
     env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
     runner = PolicyRunner(env.policy_spec, legmap)
     options = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, dq_hat),
                "oracle": (dq, dq)}
     walks = {c: walk(env, runner, cfg.seconds, seed, {"offsets": o, "correction": k}, log=c == "nominal")
-             for c, (o, k) in options.items()}
+             for c, (o, k) in options.items() if not (failed and c == "corrected")}
     spread = walk(env, runner, cfg.seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
-    out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": dq_hat.tolist(),
-           "recovery_rms_deg": float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
-           "calibration_warnings": result.warnings, "privileged": runner.privileged}
+    out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": None if failed else dq_hat.tolist(),
+           "recovery_rms_deg": None if failed else float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
+           "static_failed": failed, "calibration_warnings": [] if failed else result.warnings,
+           "privileged": runner.privileged}
     for c, w in walks.items():
         row = {"upright": w.upright, "fallen_at": w.fallen_at, "torque_mean": w.torque_mean,
                "power_mean": w.power_mean, "wall_s": w.wall_s,
@@ -112,8 +118,14 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         if c != "nominal" and w.upright and walks["nominal"].upright:
             row.update(deviation(w, walks["nominal"]))
         out[c] = row
+    if failed:
+        out["corrected"] = {"skipped": failed}
     out["variants"] = {}
-    for label, est in others.items():
+    for label, _, _ in cfg.variants:
+        if failed:
+            out["variants"][label] = {"skipped": failed}
+            continue
+        est = others[label]
         w = walk(env, runner, cfg.seconds, seed, {"offsets": dq, "correction": est})
         row = {"upright": w.upright, "fallen_at": w.fallen_at, "recovery_rms_deg": float(np.degrees(rms(est - dq)))}
         if w.upright and walks["nominal"].upright:
@@ -121,7 +133,7 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         out["variants"][label] = row
     out["spread"] = deviation(spread, walks["nominal"]) if spread.upright and walks["nominal"].upright else {}
     out["spread"]["upright"] = spread.upright
-    out["odometry"] = trial_odometry(legmap, walks["nominal"], dq, dq_hat)
+    out["odometry"] = None if failed else trial_odometry(legmap, walks["nominal"], dq, dq_hat)
     return out
 
 
@@ -151,7 +163,7 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
     """Mean +- std over trials per condition, and the ratios the paper reports."""
     conds = {}
     for c in CONDITIONS:
-        rows = [t[c] for t in trials]
+        rows = [t[c] for t in trials if "skipped" not in t[c]]
         conds[c] = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
                     "time_to_fall_s": mean_std([r["fallen_at"] for r in rows if r["fallen_at"] is not None]),
                     "torque_mean": mean_std([r["torque_mean"] for r in rows]),
@@ -166,7 +178,7 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
     spread = {k: mean_std([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
     variants = {}
     for label in (trials[0]["variants"] if trials else {}):
-        rows = [t["variants"][label] for t in trials]
+        rows = [t["variants"][label] for t in trials if "skipped" not in t["variants"][label]]
         v = {"upright": sum(r["upright"] for r in rows), "trials": len(rows),
              "recovery_rms_deg": mean_std([r["recovery_rms_deg"] for r in rows]),
              **{k: mean_std([r.get(k) for r in rows]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}}
@@ -174,16 +186,20 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
         v["corrected_over_uncorrected"] = (v["foot_strike_rms_mm"]["mean"] / unc["mean"]
                                            if v["foot_strike_rms_mm"] and unc else None)
         variants[label] = v
-    odometry = {name: {k: mean_std([t["odometry"][name][k] for t in trials]) for k in ODOMETRY_KEYS}
+    odo = [t["odometry"] for t in trials if t["odometry"] is not None]
+    odometry = {name: {k: mean_std([o[name][k] for o in odo]) for k in ODOMETRY_KEYS}
                 for name in ("no_offsets", "before", "after")}
-    odometry["pitch_m_per_deg"] = mean_std([t["odometry"]["pitch"]["m_per_deg"] for t in trials])
-    odometry["distance_m"] = mean_std([t["odometry"]["pitch"]["distance_m"] for t in trials])
-    odometry["contact_point"] = trials[0]["odometry"]["contact_point"] if trials else None
+    odometry["pitch_m_per_deg"] = mean_std([o["pitch"]["m_per_deg"] for o in odo])
+    odometry["distance_m"] = mean_std([o["pitch"]["distance_m"] for o in odo])
+    odometry["contact_point"] = odo[0]["contact_point"] if odo else None
+    failed = [t for t in trials if t.get("static_failed")]
     return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread, "odometry": odometry,
             "variants": variants,
-            "recovery_rms_deg": mean_std([t["recovery_rms_deg"] for t in trials]),
+            "recovery_rms_deg": mean_std([t["recovery_rms_deg"] for t in trials if t["recovery_rms_deg"] is not None]),
+            "static_failed": {"count": len(failed), "seeds": [t["seed"] for t in failed],
+                              "first_reason": failed[0]["static_failed"] if failed else None},
             "static_s": mean_std([t["static_s"] for t in trials]),
-            "walk_s": mean_std([t[c]["wall_s"] for t in trials for c in CONDITIONS]),
+            "walk_s": mean_std([t[c]["wall_s"] for t in trials for c in CONDITIONS if "wall_s" in t[c]]),
             "privileged": trials[0]["privileged"] if trials else []}
 
 

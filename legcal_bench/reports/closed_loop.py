@@ -29,6 +29,17 @@ def table(summary: dict) -> list[str]:
     return L
 
 
+def static_failures(summary: dict) -> list[str]:
+    """The trials whose static session set the robot could not hold: no estimate, so no
+    corrected walk (they count in the other conditions)."""
+    f = summary.get("static_failed") or {}
+    if not f.get("count"):
+        return []
+    return [f"**{f['count']} trial(s) without a calibration** (seeds {f['seeds']}): the static session set with the "
+            f"trial's offsets could not be collected, so there is no corrected walk; the first reason: "
+            f"{f['first_reason'].split('. Fix:')[0]}.", ""]
+
+
 def odometry_table(summary: dict) -> list[str]:
     o = summary["odometry"]
     L = ["Leg kinematic-inertial odometry of the nominal walks (orientation from the IMU, position from the stance "
@@ -93,7 +104,7 @@ def write(out: str | Path, summaries: list[dict], trials: list[list[dict]], code
               f"mm. Static recovery RMS "
               f"{format_mean_std(s['recovery_rms_deg'], 4)} deg; per trial: static collection + calibration "
               f"{format_mean_std(s['static_s'], 2)} s, a walk {format_mean_std(s['walk_s'], 2)} s wall.", "",
-              f"![pelvis paths]({png.name})"]
+              *static_failures(s), f"![pelvis paths]({png.name})"]
         L += ["", *odometry_table(s)]
     fs, pv = CLOSED_LOOP_FOOT_STRIKE_MM, CLOSED_LOOP_PELVIS_MM
     L += ["", f"Paper (real A3, {CLOSED_LOOP_TRIALS} trials at {CLOSED_LOOP_OFFSET_DEG:g} deg): foot strike "
