@@ -64,7 +64,7 @@ def odometry_table(summary: dict) -> list[str]:
 def plot_paths(trial: dict, path: Path, title: str) -> Path:
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 5))
-    for name in CONDITIONS:
+    for name in (c for c in CONDITIONS if "path" in trial[c]):  # no corrected walk without a calibration
         p = np.asarray(trial[name]["path"])
         ax.plot(p[:, 0], p[:, 1], color=COLOURS[name], lw=1.5, label=name + ("" if trial[name]["upright"] else " (fell)"))
         ax.plot(p[-1, 0], p[-1, 1], "o", color=COLOURS[name], ms=4)

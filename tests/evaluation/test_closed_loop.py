@@ -85,3 +85,28 @@ def test_the_closed_loop_suite_gives_every_variant_a_row_and_resumes(tmp_path, c
     stamp = files[0].stat().st_mtime_ns
     capsys.readouterr()
     assert main(args) == 0 and files[0].stat().st_mtime_ns == stamp  # kept: same key
+
+
+def test_a_trial_whose_static_set_cannot_be_held_walks_without_a_correction(monkeypatch, tmp_path):
+    """The robot cannot hold the static sessions with some offsets: that trial gets no
+    estimate and no corrected walk, is counted and named, and the others go on."""
+    import legcal_bench.protocol.collect as collect_module
+    from legcal_bench.errors import HoldError
+    from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, run_trial, summarize
+    from legcal_bench.reports.closed_loop import write
+
+    def cannot_hold(*args, **kwargs):
+        raise HoldError("segment stance_I: the robot did not hold the posture. Fix: stiffer gains")
+
+    monkeypatch.setattr(collect_module, "collect", cannot_hold)
+    cfg = ClosedLoopConfig(robot="a3", policy="a3", offsets="paper@3", trials=1, seconds=1.0, calibrator="interfoot",
+                           variants=(("zero-default", "zero", ()),))
+    t = run_trial(cfg, 0)
+    assert t["static_failed"].startswith("segment stance_I") and t["estimate_rad"] is None
+    assert t["corrected"] == {"skipped": t["static_failed"]} and "skipped" in t["variants"]["zero-default"]
+    assert t["uncorrected"]["upright"] and t["oracle"]["upright"] and t["odometry"] is None
+    s = summarize(cfg, [t])
+    assert s["static_failed"]["count"] == 1 and s["static_failed"]["seeds"] == [0]
+    assert s["conditions"]["corrected"]["trials"] == 0 and s["conditions"]["uncorrected"]["trials"] == 1
+    write(tmp_path, [s], [[t]], "test", "test")
+    assert "1 trial(s) without a calibration** (seeds [0])" in (tmp_path / "report.md").read_text()
