@@ -32,14 +32,18 @@ def joint_index(spec: PolicySpec, legmap: LegMap) -> np.ndarray:
 
 
 class PolicyRunner:
-    def __init__(self, spec: PolicySpec | str, legmap: LegMap):
+    """`model`: a network already in memory (obs -> action), e.g. a policy being
+    trained; by default the spec's file is loaded."""
+
+    def __init__(self, spec: PolicySpec | str, legmap: LegMap, model=None):
         self.spec = spec if isinstance(spec, PolicySpec) else load_policy_spec(spec)
         self.legmap = legmap
         self.index = joint_index(self.spec, legmap)
         self.terms = bind(self.spec)
         self.n_obs = observation_size(self.spec)
-        self.model = load_model(self.spec.model_file, self.spec.model_format, self.n_obs, len(self.spec.joints),
-                                f"policy spec {self.spec.path}")
+        self.model = model if model is not None else load_model(
+            self.spec.model_file, self.spec.model_format, self.n_obs, len(self.spec.joints),
+            f"policy spec {self.spec.path}")
         self.default_q = np.asarray(self.spec.default_q)
         self.command = np.asarray(self.spec.command, dtype=float)
         self.last_action = np.zeros(len(self.spec.joints))
@@ -54,7 +58,7 @@ class PolicyRunner:
 
     def reset(self) -> None:
         self.last_action = np.zeros(len(self.spec.joints))
-        self.model.reset()
+        getattr(self.model, "reset", lambda: None)()
 
     def observation(self, obs: dict, info: dict, time: float) -> np.ndarray:
         return build_observation(self.terms, ObsContext(obs, info, time, self.last_action, self.command, self.index,
@@ -62,13 +66,21 @@ class PolicyRunner:
 
     def act(self, obs: dict, info: dict, time: float) -> np.ndarray:
         """Joint targets (12, leg-map order, rad) for this control step."""
-        a = self.model(self.observation(obs, info, time))
-        if self.spec.action_clip is not None:
-            a = np.clip(a, -self.spec.action_clip, self.spec.action_clip)
+        return self.targets(self.model(self.observation(obs, info, time)))
+
+    def targets(self, action: np.ndarray) -> np.ndarray:
+        """Apply an action (policy order, clipped per the spec): it becomes the last
+        action; the joint targets in leg-map order."""
+        a = action if self.spec.action_clip is None else np.clip(action, -self.spec.action_clip,
+                                                                  self.spec.action_clip)
         self.last_action = a
         target = np.empty(12)
         target[self.index] = self.default_q + self.spec.action_scale * a
         return target
+
+    def action_of(self, target: np.ndarray) -> np.ndarray:
+        """The action (policy order) that gives these joint targets (leg-map order)."""
+        return (np.asarray(target)[self.index] - self.default_q) / self.spec.action_scale
 
     def walking_config(self, **overrides) -> WalkingConfig:
         return walking_config(self.spec, self.legmap, **overrides)

@@ -21,6 +21,7 @@ robots' are in policies/teachers/) holds a robot's gait, feedback and rates.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -95,14 +96,14 @@ def joint_targets(kin: LegKinematics, gait: Gait, p: GaitParams = GaitParams()) 
     q = posture_ik(kin, pose_xyz_rpy(gait.left[0], [0, 0, 0]), pose_xyz_rpy(gait.right[0], [0, 0, 0]), postures[:1])[0]
     com = kin.com(q)  # the CoM in the pelvis frame at the starting pose
     postures[:, 0], postures[:, 1] = cx[:, 0] + p.com_x_bias - com[0], cy[:, 0] - com[1]
-    # One batch: every frame's soles in the pelvis frame, Newton from the starting pose.
+    # One batch: every frame's (flat) soles in the pelvis frame, Newton from the starting pose.
     T_BW = inverse(posture_poses(postures))
-    flat = lambda P: np.broadcast_to(np.eye(4), (len(P), 4, 4)).copy()  # noqa: E731
-    H = {}
-    for side, P in (("left", gait.left), ("right", gait.right)):
-        H[side] = flat(P)
-        H[side][:, :3, 3] = P
-    return kin.solve_batch(T_BW @ H["left"], T_BW @ H["right"], q)
+    flat = np.zeros((len(gait.time), 3))
+    T_left, T_right = (T_BW @ posture_poses(np.hstack([P, flat])) for P in (gait.left, gait.right))
+    return kin.solve_batch(T_left, T_right, q)
+
+
+FED_BACK = {"ankle_roll": 0, "hip_roll": 0, "ankle_pitch": 1, "hip_pitch": 1}  # role -> torso axis it corrects
 
 
 @dataclass(frozen=True)
@@ -131,14 +132,12 @@ class ZmpWalker:
         n_steps = int(np.ceil(max(seconds - gait.start_s, 0.0) / gait.step_period)) + 2
         self.plan = plan_gait(kin, n_steps, gait)
         self.Q = joint_targets(kin, self.plan, gait)
-        roles = list(legmap.joint_roles)
-        axes = kin.joint_axes(self.Q[0])
-        self.idx = {}
-        for leg, side in ((range(6), "left"), (range(6, 12), "right")):
-            self.idx[side] = {roles[i]: i for i in leg}
-        sign = lambda i, c: float(np.sign(axes[i, c]) or 1.0)  # noqa: E731
-        self.sign = {s: {"ankle_roll": sign(self.idx[s]["ankle_roll"], 0), "ankle_pitch": sign(self.idx[s]["ankle_pitch"], 1),
-                         "hip_roll": sign(self.idx[s]["hip_roll"], 0), "hip_pitch": sign(self.idx[s]["hip_pitch"], 1)} for s in ("left", "right")}
+        # Each fed-back joint of each leg: its column and the sign of its axis along the
+        # torso axis it corrects (x for roll, y for pitch), so any robot's conventions work.
+        roles, axes = list(legmap.joint_roles), kin.joint_axes(self.Q[0])
+        self.joints = [[(i, float(np.sign(axes[i, FED_BACK[roles[i]]]) or 1.0)) for i in leg if roles[i] in FED_BACK]
+                       for leg in (range(6), range(6, 12))]
+        self.roles = roles
         self.planned_load = np.stack([(self.plan.right[:, 2] > 1e-9) | (self.plan.left[:, 2] <= 1e-9),
                                       (self.plan.left[:, 2] > 1e-9) | (self.plan.right[:, 2] <= 1e-9)], 1).astype(float)
         self.default_q = self.Q[0]
@@ -164,16 +163,17 @@ class ZmpWalker:
         else:
             load = self.planned_load[k]
         share = load / max(load.sum(), 1e-9)
-        for j, side in enumerate(("left", "right")):
-            i, s = self.idx[side], self.sign[side]
-            q[i["ankle_roll"]] += share[j] * s["ankle_roll"] * (f.roll_p * tilt[0] + f.roll_d * w[0])
-            q[i["ankle_pitch"]] += share[j] * s["ankle_pitch"] * (f.pitch_p * tilt[1] + f.pitch_d * w[1])
-            q[i["hip_roll"]] += share[j] * s["hip_roll"] * f.hip_roll_p * tilt[0]
-            q[i["hip_pitch"]] += share[j] * s["hip_pitch"] * f.hip_pitch_p * tilt[1]
+        correction = {"ankle_roll": f.roll_p * tilt[0] + f.roll_d * w[0],
+                      "ankle_pitch": f.pitch_p * tilt[1] + f.pitch_d * w[1],
+                      "hip_roll": f.hip_roll_p * tilt[0], "hip_pitch": f.hip_pitch_p * tilt[1]}
+        for leg, joints in enumerate(self.joints):
+            for i, sign in joints:
+                q[i] += share[leg] * sign * correction[self.roles[i]]
         return q
 
 
 TEACHER_FORMAT = "legcal-teacher/1"
+TEACHERS_DIR = Path(__file__).resolve().parent / "teachers"  # the built-in robots' recipes
 
 
 @dataclass(frozen=True)
@@ -191,8 +191,6 @@ class TeacherRecipe:
 
 def load_teacher_recipe(path) -> TeacherRecipe:
     """Read and check a teacher recipe; ConfigError naming the field and the fix."""
-    from pathlib import Path
-
     import yaml
 
     from legcal_bench.errors import ConfigError

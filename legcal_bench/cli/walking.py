@@ -150,32 +150,30 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     return 0
 
 
-POLICIES_DIR = __import__("pathlib").Path(__file__).resolve().parents[2] / "policies"
-
-
 def cmd_train_policy(a: argparse.Namespace) -> int:
     from pathlib import Path
 
     from legcal_bench.errors import ConfigError
     from legcal_bench.evaluation.distill import DistillConfig, export, train
     from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
-    from legcal_bench.policies.zmp_walker import load_teacher_recipe
+    from legcal_bench.policies.spec import WALKERS_DIR
+    from legcal_bench.policies.zmp_walker import TEACHERS_DIR, load_teacher_recipe
     from legcal_bench.provenance import code_version, describe
     from legcal_bench.robots import BUILTIN, load_robot
 
     legmap = load_robot(a.robot, a.mjcf)
     teacher = a.teacher
     if teacher is None:
-        if a.robot not in BUILTIN or not (POLICIES_DIR / "teachers" / f"{a.robot}.yaml").is_file():
+        if a.robot not in BUILTIN or not (TEACHERS_DIR / f"{a.robot}.yaml").is_file():
             raise ConfigError(f"--teacher: robot {a.robot!r} has no built-in teacher recipe; write one (see "
-                              f"{POLICIES_DIR / 'teachers'}, format legcal-teacher/1) and pass --teacher FILE")
-        teacher = POLICIES_DIR / "teachers" / f"{a.robot}.yaml"
+                              f"{TEACHERS_DIR}, format legcal-teacher/1) and pass --teacher FILE")
+        teacher = TEACHERS_DIR / f"{a.robot}.yaml"
     recipe = load_teacher_recipe(teacher)
     if a.iterations < 1 or a.rollouts < 1:
         raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
     cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed)
     name = a.name or f"legcal_{legmap.name}_walker"
-    out = Path(a.out or POLICIES_DIR / "walkers" / str(a.robot))
+    out = Path(a.out or WALKERS_DIR / str(a.robot))
     made_by = (f"legcal-bench train-policy --robot {a.robot} --teacher {teacher} --iterations {a.iterations} "
                f"--rollouts {a.rollouts} --offsets-deg {a.offsets_deg:g} --seed {a.seed}")
     code = describe(code_version())

@@ -31,7 +31,8 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
-from legcal_bench.policies.observation import ObsContext, bind, build_observation, observation_size
+from legcal_bench.policies.observation import observation_size
+from legcal_bench.policies.runner import PolicyRunner
 from legcal_bench.policies.spec import ObsTerm, PolicySpec
 from legcal_bench.policies.zmp_walker import TeacherRecipe, ZmpWalker
 
@@ -67,12 +68,12 @@ def student_terms(recipe: TeacherRecipe) -> tuple[ObsTerm, ...]:
 
 def student_spec(name: str, legmap, recipe: TeacherRecipe, teacher: ZmpWalker, cfg: DistillConfig, path, model_file,
                  model_format: str = "torchscript") -> PolicySpec:
-    from legcal_bench.envs.walking import default_walking_config
+    from legcal_bench.protocol.servos import servo_gains
 
-    w = default_walking_config(legmap)
+    w = servo_gains(legmap)  # the gains `collect` uses
     return PolicySpec(name=name, path=path, model_file=model_file, model_format=model_format,
                       joints=tuple(legmap.joint_names), default_q=tuple(float(v) for v in teacher.default_q),
-                      action_scale=cfg.action_scale, action_clip=None, kp=w.kp, kd=w.kd, torque_limit=None,
+                      action_scale=cfg.action_scale, action_clip=None, kp=tuple(w.kp), kd=tuple(w.kd), torque_limit=None,
                       physics_hz=recipe.physics_hz, control_hz=recipe.control_hz, command=(0.0, 0.0, 0.0),
                       observation=student_terms(recipe))
 
@@ -129,25 +130,20 @@ def rollout(env, teacher: ZmpWalker, spec: PolicySpec, student: Student | None, 
     """One episode: the teacher's action with probability `beta` per step, else the
     student's; every step labelled with the teacher's (in the student's action units)."""
     u = env.unwrapped
-    terms = bind(spec)
-    index = np.array([u.legmap.joint_names.index(j) for j in spec.joints])
-    default_q, scale = np.asarray(spec.default_q), spec.action_scale
+    runner = PolicyRunner(spec, u.legmap, model=student if student is not None else lambda o: None)
     obs, info = env.reset(seed=seed, options={"offsets": offsets})
     teacher.reset()
+    runner.reset()
     n = int(round(seconds / u.dt))
-    O, L = np.empty((n, observation_size(spec)), np.float32), np.empty((n, len(index)), np.float32)
-    last = np.zeros(len(index))
-    target = np.empty(12)
+    O, L = np.empty((n, runner.n_obs), np.float32), np.empty((n, len(spec.joints)), np.float32)
     k = 0
     for k in range(n):
         t = u.sim.time
-        o = build_observation(terms, ObsContext(obs, info, t, last, np.zeros(3), index, default_q))
-        label = (teacher.act(obs, info, t)[index] - default_q) / scale
-        a = label if student is None or rng.random() < beta else student(o)
+        o = runner.observation(obs, info, t)
+        label = runner.action_of(teacher.act(obs, info, t))
         O[k], L[k] = o, label
-        last = a
-        target[index] = default_q + scale * a
-        obs, _, terminated, _, info = env.step(target)
+        a = label if student is None or rng.random() < beta else student(o)
+        obs, _, terminated, _, info = env.step(runner.targets(a))
         if terminated:
             break
     return Rollout(O[:k + 1], L[:k + 1], info["fallen_at"], float(u.sim.time))
