@@ -171,11 +171,15 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
     recipe = load_teacher_recipe(teacher)
     if a.iterations < 1 or a.rollouts < 1:
         raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
-    cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed)
+    if a.selection_walks < 0:
+        raise ConfigError(f"--selection-walks {a.selection_walks}: need 0 or more random patterns")
+    cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed,
+                        eval_rollouts=a.selection_walks)
     name = a.name or f"legcal_{legmap.name}_walker"
     out = Path(a.out or WALKERS_DIR / str(a.robot))
     made_by = (f"legcal-bench train-policy --robot {a.robot} --teacher {teacher} --iterations {a.iterations} "
-               f"--rollouts {a.rollouts} --offsets-deg {a.offsets_deg:g} --seed {a.seed}")
+               f"--rollouts {a.rollouts} --offsets-deg {a.offsets_deg:g} --selection-walks {a.selection_walks} "
+               f"--seed {a.seed}")
     code = describe(code_version())
     lines = []
 
@@ -208,6 +212,7 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
+    from legcal_bench.evaluation.distill import DistillConfig
     from legcal_bench.sim.offsets import PRESETS_HELP
 
     w = sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional "
@@ -262,6 +267,9 @@ def add_commands(sub) -> None:
     t.add_argument("--iterations", type=int, default=7, help="DAgger iterations (the first is behaviour cloning)")
     t.add_argument("--rollouts", type=int, default=16, help="20 s rollouts per iteration")
     t.add_argument("--offsets-deg", type=float, default=3.0, help="training offsets: uniform +- this per joint")
+    t.add_argument("--selection-walks", type=int, default=DistillConfig.eval_rollouts,
+                   help="random offset patterns (besides none and paper@3) the pure student walks after each "
+                        f"iteration to choose the checkpoint (default {DistillConfig.eval_rollouts})")
     t.add_argument("--seed", type=int, default=0)
     t.add_argument("--name", default=None, help="the policy's name in its spec")
     t.add_argument("--out", default=None, help="output folder (default policies/walkers/<robot>); replaced only "

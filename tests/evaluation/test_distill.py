@@ -18,12 +18,18 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
 def test_a_tiny_training_run_exports_a_policy_that_runs_in_both_formats(tmp_path, capsys):
     out = tmp_path / "walker"
-    argv = ["train-policy", "--robot", "a3", "--iterations", "2", "--rollouts", "1", "--out", str(out), "--quiet"]
+    argv = ["train-policy", "--robot", "a3", "--iterations", "2", "--rollouts", "1", "--selection-walks", "1",
+            "--out", str(out), "--quiet"]
     from legcal_bench.evaluation import distill
 
-    tiny = distill.DistillConfig(seconds=1.5, eval_rollouts=1, train_steps=30)
+    tiny = distill.DistillConfig(seconds=1.5, train_steps=30)
     orig = distill.DistillConfig
-    distill.DistillConfig = lambda **kw: orig(**{**tiny.__dict__, **kw})  # the recipe, shortened
+
+    def shortened(**kw):  # the recipe, shortened
+        return orig(**{**tiny.__dict__, **kw})
+
+    shortened.eval_rollouts = orig.eval_rollouts  # the parser's default
+    distill.DistillConfig = shortened
     try:
         assert main(argv) == 0
     finally:
@@ -36,7 +42,8 @@ def test_a_tiny_training_run_exports_a_policy_that_runs_in_both_formats(tmp_path
     assert its[1]["samples"] > its[0]["samples"]  # DAgger aggregates
     key = [(r["eval_upright"], r["eval_mean_upright_s"], -r["val_loss"]) for r in its]
     assert key[t["selected_iteration"]] == max(key)  # the rule: most upright, then longest, then lowest loss
-    assert "train-policy --robot a3" in t["made_by"] and t["code"]
+    assert "train-policy --robot a3" in t["made_by"] and "--selection-walks 1" in t["made_by"] and t["code"]
+    assert its[0]["eval_total"] == 3  # none, paper@3 and one random pattern
 
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.robots import load_robot
@@ -63,6 +70,8 @@ def test_train_policy_names_a_missing_teacher_and_bad_counts(tmp_path, capsys, t
     assert "--teacher" in capsys.readouterr().err
     assert main(["train-policy", "--robot", "a3", "--iterations", "0", "--out", str(tmp_path / "x")]) == 2
     assert "--iterations 0" in capsys.readouterr().err
+    assert main(["train-policy", "--robot", "a3", "--selection-walks", "-1", "--out", str(tmp_path / "x")]) == 2
+    assert "--selection-walks -1" in capsys.readouterr().err
     bad = tmp_path / "t.yaml"
     bad.write_text("format: legcal-teacher/1\nfeedback: {roll_gain: 1}\n")
     assert main(["train-policy", "--robot", "a3", "--teacher", str(bad), "--out", str(tmp_path / "x")]) == 2
