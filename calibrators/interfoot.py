@@ -29,7 +29,9 @@ from legcal_bench import paper
 from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option, preprocess_options
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.confounds import confound_lines, confound_report
 from legcal_bench.estimation.datacheck import data_warnings
+from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
 from legcal_bench.estimation.levelling import levelling_rotations, tilted, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
@@ -38,8 +40,8 @@ from legcal_bench.estimation.preprocess import FilterReport, filter_warnings, se
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                  uncertainty_warnings)
-from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, InterFootTerm, KneePriorTerm, SegmentKinematics,
-                                           TikhonovTerm)
+from legcal_bench.estimation.terms import (OFFSETS, FlatGroundTerm, HeldParametersTerm, InterFootTerm, KneePriorTerm,
+                                           SegmentKinematics, TikhonovTerm)
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
@@ -81,6 +83,7 @@ class _Prepared:
     up_B: np.ndarray
     R_WB: np.ndarray
     frames: np.ndarray
+    ft: np.ndarray | None = None  # (N, 2, 6) ankle wrenches of these frames, if recorded
 
 
 class InterFootCalibrator(Calibrator):
@@ -91,7 +94,7 @@ class InterFootCalibrator(Calibrator):
                  lambda_knee: float | None = None, knee_prior_shift_rad: float = 0.0,
                  trim_fraction: float = paper.TRIM_FRACTION, bound: float = paper.OFFSET_BOUND_RAD,
                  max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10,
-                 imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S):
+                 imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S, effects: str = ""):
         if setting not in SETTING_NAMES:
             raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in ("projected", "alternating"):
@@ -107,6 +110,11 @@ class InterFootCalibrator(Calibrator):
         self.max_outer = number_option("max_outer", max_outer, 1, integer=True)
         self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
         self.preprocess = preprocess_options(n_max, imu, imu_window_s)
+        self.effect_names = tuple(n for n in (str(effects).replace(",", " ").split()) if n)
+        if self.effect_names:
+            load_effects(self.effect_names)  # a bad name fails before any data is read
+            if solver != "projected":
+                raise CalibrationError("effects: fits with model-gap effects use the projected solver")
 
     @classmethod
     def benchmark_variants(cls) -> dict[str, dict]:
@@ -116,7 +124,8 @@ class InterFootCalibrator(Calibrator):
     def settings(self) -> dict:
         return {"setting": self.setting, "solver": self.solver, "jacobian": self.jacobian, **self.overrides,
                 "knee_prior_shift_rad": self.knee_prior_shift_rad, "trim_fraction": self.trim_fraction,
-                "bound": self.bound, "max_outer": self.max_outer, "preprocess": asdict(self.preprocess)}
+                "bound": self.bound, "max_outer": self.max_outer, "preprocess": asdict(self.preprocess),
+                "effects": list(self.effect_names)}
 
     @staticmethod
     def _posterior(kin: LegKinematics, robot: LegMap, stances: list[Recording], problem, dq: np.ndarray,
@@ -185,7 +194,8 @@ class InterFootCalibrator(Calibrator):
             reports.append(rep)
             for s in segs:
                 up = up_in_base(s.imu_acc, R_BI)
-                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames))
+                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames,
+                                          None if r.ft is None else r.ft[s.frames]))
         warnings += filter_warnings(reports)
         if not segments:
             raise CalibrationError("no usable frames in any stance after filtering: "
@@ -204,6 +214,7 @@ class InterFootCalibrator(Calibrator):
         problem = _InterFootProblem(kin, segments, w, prior, knees, self.bound)
         t_pre = time.perf_counter() - t0
 
+        all_segments = list(segments)
         # First solve, trim the largest residual frames, solve again.
         t1 = time.perf_counter()
         dq, hist1 = problem.solve(np.zeros(12), self)
@@ -236,10 +247,17 @@ class InterFootCalibrator(Calibrator):
         warnings += data_warnings(kin, recordings, dq)
         t_obs = time.perf_counter() - t2
         r_final, _ = problem.evaluate(dq, "projected")
+        effects_report = None
+        if self.effect_names:
+            t3 = time.perf_counter()
+            effects_report, dq_eff, eff_warnings = fit_effects(self, kin, robot, stances, all_segments, w, prior,
+                                                               knees, dq)
+            warnings += eff_warnings
+            effects_report["seconds"] = time.perf_counter() - t3
         return CalibrationResult(
             calibrator=self.name, robot=robot.name,
-            offsets_rad={n: float(v) for n, v in zip(robot.joint_names, dq)},
-            pitch_sums_rad=pitch_sums(dq, signs),
+            offsets_rad={n: float(v) for n, v in zip(robot.joint_names, dq if effects_report is None else dq_eff)},
+            pitch_sums_rad=pitch_sums(dq if effects_report is None else dq_eff, signs),
             conditioning=obs,
             diagnostics={
                 "setting": setting_name, "weights": asdict(w),
@@ -252,6 +270,7 @@ class InterFootCalibrator(Calibrator):
                 "pitch_signs": signs.tolist(),
                 "posterior": post if post is not None else {"note": NO_NOISE},
                 "imu_tilt_response": tilt_response.tolist(),
+                **({"effects": effects_report} if effects_report is not None else {}),
             },
             timing_s={"preprocess": t_pre, "solve": t_solve, "observability": t_obs,
                       "total": time.perf_counter() - t0},
@@ -262,11 +281,17 @@ class InterFootCalibrator(Calibrator):
 
 class _InterFootProblem:
     """The weighted objective as terms over the offsets block, per contact segment an
-    inter-foot term and a flat-ground term (rows in that order), then the priors."""
+    inter-foot term and a flat-ground term (rows in that order), then the priors. With
+    an `EffectModel`, every segment's kinematics carries the effects (their blocks
+    follow the offsets; `q_ref` are the offsets at which effects evaluate loads) and
+    `held` parameters are pinned at zero."""
 
     def __init__(self, kin: LegKinematics, segments: list[_Prepared], w: InterFootWeights, prior, knees,
-                 bound: float):
+                 bound: float, model: EffectModel | None = None, q_ref: np.ndarray | None = None,
+                 held: tuple[int, ...] = ()):
         self.kin, self.w, self.prior, self.knees, self.bound = kin, w, prior, knees, bound
+        self.model, self.q_ref, self.held = model, q_ref, tuple(held)
+        self.n = 12 if model is None else model.n
         if w.row_sigmas is None:
             self.sf = np.sqrt(w.lambda_f) * w.unit_scale * np.ones(6)
             self.sg = np.sqrt(w.lambda_g) * w.unit_scale * np.ones(5)
@@ -283,7 +308,11 @@ class _InterFootProblem:
         self.segments = segments
         self.feet, terms = [], []
         for seg in segments:
-            sk = SegmentKinematics(self.kin, seg.q_enc)
+            if self.model is None:
+                sk = SegmentKinematics(self.kin, seg.q_enc)
+            else:
+                sk = EffectSegment(self.model, SegmentData(seg.q_enc, seg.ft, seg.up_B,
+                                                           q_ref=seg.q_enc + self.q_ref))
             feet = InterFootTerm(f"{seg.name}/feet", sk, self.sf)
             self.feet.append(feet)
             terms += [feet, FlatGroundTerm(f"{seg.name}/flat", sk, seg.up_B, seg.R_WB, self.sg)]
@@ -291,7 +320,12 @@ class _InterFootProblem:
             terms.append(TikhonovTerm(self.wq))
         if self.prior is not None and self.w.lambda_knee > 0:
             terms.append(KneePriorTerm(self.knees, self.prior, self.sk))
-        self.problem = Problem([Block(OFFSETS, 12, bound=self.bound)], terms)
+        blocks = [Block(OFFSETS, 12, bound=self.bound)]
+        if self.model is not None:
+            blocks += [Block(name, size) for name, size in self.model.blocks]
+            if self.held:
+                terms.append(HeldParametersTerm(self.model, self.held))
+        self.problem = Problem(blocks, terms)
 
     @property
     def n_data_rows(self) -> int:
@@ -303,8 +337,9 @@ class _InterFootProblem:
             H[self.knees, self.knees] += self.sk**2
         return H
 
-    def means_at(self, dq: np.ndarray) -> list:
-        return [t.update_mean(dq) for t in self.feet]
+    def means_at(self, x: np.ndarray) -> list:
+        values = self.problem.unpack(x) if len(x) > 12 else x
+        return [t.update_mean(values) for t in self.feet]
 
     def evaluate(self, dq: np.ndarray, mode: str):
         """Stacked residual and Jacobian with the segment means re-estimated
@@ -315,7 +350,8 @@ class _InterFootProblem:
 
     def solve(self, dq0: np.ndarray, cal: InterFootCalibrator) -> tuple[np.ndarray, list]:
         lb, ub = -cal.bound * np.ones(12), cal.bound * np.ones(12)
-        x0 = np.clip(dq0, lb + 1e-12, ub - 1e-12)
+        x0 = np.array(dq0, dtype=float)
+        x0[:12] = np.clip(x0[:12], lb + 1e-12, ub - 1e-12)
         history = []
         if cal.solver == "projected":
             for t in self.feet:
@@ -359,5 +395,68 @@ class _InterFootProblem:
             pos += 11 * n
             score = (feet**2).sum(1) + (flat**2).sum(1)
             keep = np.sort(np.argsort(score)[: n - int(round(fraction * n))])
-            kept.append(_Prepared(seg.name, seg.q_enc[keep], seg.up_B[keep], seg.R_WB[keep], seg.frames[keep]))
+            kept.append(_Prepared(seg.name, seg.q_enc[keep], seg.up_B[keep], seg.R_WB[keep], seg.frames[keep],
+                                  None if seg.ft is None else seg.ft[keep]))
         self.build(kept)
+
+
+def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, stances: list[Recording],
+                segments: list[_Prepared], w: InterFootWeights, prior, knees, dq0: np.ndarray):
+    """The fit with the calibrator's model-gap effects (`--with-effects`), from the
+    offsets-only estimate `dq0`: the confound report at the start (parameters the data
+    cannot separate are held at zero), the same solve-trim-solve as the offsets-only
+    fit, loads re-evaluated at the new offsets once, then the posterior of every
+    parameter from the noise-whitened data rows. Returns (report, offsets, warnings)."""
+    model = EffectModel(kin, load_effects(cal.effect_names))
+    if any(e.needs_ft for e in model.effects) and any(s.ft is None for s in segments):
+        raise CalibrationError(f"effects {[e.name for e in model.effects if e.needs_ft]}: the stance recordings "
+                               "have no ankle force/torque wrenches (ft)")
+    sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
+    if sig is None:
+        raise CalibrationError("effects: the recordings declare no sensor noise; the confound report and the "
+                               "posterior need it (sensor_model.encoder_noise_std, accel_noise_std)")
+    white = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
+        sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
+
+    def whitened_jacobian(segs, x, q_ref):
+        p = _InterFootProblem(kin, segs, white, None, [], cal.bound, model, q_ref)
+        p.means_at(x)
+        _, J = p.evaluate(x, "projected")
+        return J[:p.n_data_rows]
+
+    x = np.r_[dq0, np.zeros(model.n - 12)]
+    before = confound_report(whitened_jacobian(segments, x, dq0), model, robot.joint_names)
+    held = tuple(model.names.index(h) for h in before["held"])
+    q_ref = dq0
+    for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
+        problem = _InterFootProblem(kin, segments, w, prior, knees, cal.bound, model, q_ref, held)
+        x, _ = problem.solve(x, cal)
+        if cal.trim_fraction > 0:
+            problem.trim(x, cal.trim_fraction)
+            x, _ = problem.solve(x, cal)
+        q_ref = x[:12]
+    J = whitened_jacobian(problem.segments, x, q_ref)
+    confounds = confound_report(J, model, robot.joint_names)
+    free = [i for i in range(model.n) if i not in held]
+    H = J[:, free].T @ J[:, free]
+    cov = np.full((model.n, model.n), np.nan)
+    try:
+        cov[np.ix_(free, free)] = np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        pass
+    std = np.sqrt(np.diag(cov))
+    params = {}
+    for i in range(12, model.n):
+        params[model.names[i]] = {"value": float(x[i]), "std": float(std[i]), "unit": model.units[i],
+                                  "held": i in held}
+    report = {
+        "effects": [e.name for e in model.effects],
+        "parameters": params,
+        "offsets_only_rad": {n: float(v) for n, v in zip(robot.joint_names, dq0)},
+        "offsets_rad": {n: float(v) for n, v in zip(robot.joint_names, x[:12])},
+        "offsets_std_rad": {n: float(v) for n, v in zip(robot.joint_names, std[:12])},
+        "confounds": confounds, "confounds_at_start": before,
+        "frames_used": int(sum(len(s.frames) for s in problem.segments)),
+    }
+    warnings = [f"effects: {line}" for line in confound_lines(confounds)]
+    return report, x[:12], warnings

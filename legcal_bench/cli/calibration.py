@@ -47,6 +47,8 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
         options["setting"] = a.setting
     if a.solver is not None:
         options["solver"] = a.solver
+    if a.with_effects:
+        options["effects"] = " ".join(a.with_effects)
     calibrator = get_calibrator(a.calibrator, **options)  # a bad name or option fails before any data is read
     writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
@@ -76,6 +78,17 @@ def format_result(result, names: list[str]) -> str:
                                                  ("kappa(H_reg)", "kappa_H_reg")) if key in c]
     if kappas:
         lines.append("conditioning: " + ", ".join(f"{label} {v:.4g}" for label, v in kappas))
+    eff = result.diagnostics.get("effects")
+    if eff:
+        lines.append(f"with effects {', '.join(eff['effects'])} ({eff['seconds']:.1f} s): offsets (deg) offsets-only "
+                     "-> with effects (1 sigma)")
+        for n in names:
+            lines.append(f"  {n:<28} {np.rad2deg(eff['offsets_only_rad'][n]):+8.4f} -> "
+                         f"{np.rad2deg(eff['offsets_rad'][n]):+8.4f} (±{np.rad2deg(eff['offsets_std_rad'][n]):.4f})")
+        lines.append("effect parameters (SI units, 1 sigma):")
+        for n, p in eff["parameters"].items():
+            lines.append(f"  {n:<28} {p['value']:+.4e} ± {p['std']:.1e} {p['unit']}"
+                         + ("  (held at zero: not estimable from these data)" if p["held"] else ""))
     lines.append("time (s): " + ", ".join(f"{k} {v:.3f}" for k, v in result.timing_s.items()))
     lines += [f"WARNING: {w}" for w in result.warnings]
     return "\n".join(lines)
@@ -276,6 +289,11 @@ def add_commands(sub) -> None:
     k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
     k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="any calibrator option, e.g. --option lambda_q=0.1 (repeatable)")
+    k.add_argument("--with-effects", nargs="+", default=None, metavar="EFFECT",
+                   help="interfoot: also fit these model-gap effects (plug-ins of the entry-point group "
+                        "legcal_bench.effects; built in: leg_length, encoder_scale, compliance, imu_tilt, hip_axis): "
+                        "the result holds the offsets before and after, each parameter with its posterior standard "
+                        "deviation, and what the data confound it with")
     k.add_argument("--out", default="result.json", help="result JSON (default result.json)")
     k.add_argument("--plots", default=None, help="directory for the observability plot")
     k.set_defaults(func=cmd_calibrate)

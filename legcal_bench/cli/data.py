@@ -14,8 +14,11 @@ from legcal_bench.cli.robots import robot_args
 def cmd_collect(a: argparse.Namespace) -> int:
     from legcal_bench.protocol.collect import CollectConfig, collect, format_summary
 
+    mjcf_file = a.sim_model is not None and a.sim_model.lower().endswith(".xml")
     cfg = CollectConfig(
-        robot=a.robot, mjcf=a.mjcf, sim_robot=a.sim_model, mode=a.mode, stances=tuple(a.stances),
+        robot=a.robot, mjcf=a.mjcf, sim_robot=None if mjcf_file else a.sim_model,
+        sim_model=a.sim_model if mjcf_file else None, effects=tuple(a.effect or ()), mode=a.mode,
+        stances=tuple(a.stances),
         offsets=a.offsets, sensors=a.sensors, seed=a.seed, heldout=a.heldout, rate_hz=a.rate,
         stance_s=a.stance_seconds, heldout_s=a.heldout_seconds, standing_s=a.standing_seconds,
         knee_straight_error_rad=float(np.deg2rad(a.knee_error_deg)), period_scale=a.period_scale,
@@ -26,14 +29,19 @@ def cmd_collect(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
+    from legcal_bench.sim.effects import EFFECTS_HELP
     from legcal_bench.sim.offsets import PRESETS_HELP
     from legcal_bench.sim.sensors import SENSOR_PRESETS
 
     c = sub.add_parser("collect", help="simulate static double-support recordings with known offsets")
     robot_args(c)
     c.add_argument("--sim-model", default=None,
-                   help="simulate this robot (name or leg map) instead; recordings still name --robot, "
-                        "the nominal model calibrators use")
+                   help="simulate this instead: an MJCF file (.xml; an edited copy of the robot's, same joint "
+                        "names: the generic model gap) or a robot (name or leg map); recordings still name "
+                        "--robot, the nominal model calibrators use")
+    c.add_argument("--effect", action="append", default=None, metavar="NAME:key=value,...",
+                   help=f"a reality effect the calibration model lacks (repeatable; only the ground truth says it "
+                        f"is there): {EFFECTS_HELP}")
     c.add_argument("--mode", default="weld", choices=("kinematic", "weld", "contact"), help="floor model (default weld)")
     c.add_argument("--stances", nargs="+", default=["I", "II", "III", "IV"], help="stances to record (default I II III IV)")
     c.add_argument("--offsets", default="paper", help=f"injected offsets: {PRESETS_HELP} (default paper)")

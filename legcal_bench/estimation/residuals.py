@@ -58,6 +58,40 @@ def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with
     return r, J
 
 
+def flat_residuals_extended(ek, up0: np.ndarray, R_WB0: np.ndarray):
+    """`flat_residuals` with model-gap effects (`legcal_bench.estimation.effects.
+    ExtendedKinematics`): sole Jacobians over all n columns and the IMU's vertical
+    corrected, up = Q up0 and R_WB = R_WB0 Q^T, with dQ = Q [w]x per column (w in imu_W).
+    Returns (N, 5) residuals and (N, 5, n) Jacobians."""
+    Q, W = ek.imu_Q, ek.imu_W
+    up = up0 @ Q.T
+    R_WB = R_WB0 @ Q.T
+    n = len(up0)
+    r = np.empty((n, 5))
+    d = ek.p_L - ek.p_R
+    r[:, 0] = np.einsum("ni,ni->n", up, d)
+    zL_B, zR_B = ek.R_L[:, :, 2], ek.R_R[:, :, 2]
+    zL = np.einsum("nij,nj->ni", R_WB, zL_B)
+    zR = np.einsum("nij,nj->ni", R_WB, zR_B)
+    r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]
+    J = np.zeros((n, 5, ek.JL.shape[-1]))
+    u = up[:, None, :]
+    J[:, 0] = (u @ ek.R_L @ ek.JL[:, :3])[:, 0] - (u @ ek.R_R @ ek.JR[:, :3])[:, 0]
+    J[:, 1:3] = R_WB[:, :2] @ ek.R_L @ _EZ_CROSS @ ek.JL[:, 3:]
+    J[:, 3:5] = R_WB[:, :2] @ ek.R_R @ _EZ_CROSS @ ek.JR[:, 3:]
+    cols = np.flatnonzero(np.abs(W).sum(axis=0) > 0)
+    if cols.size:
+        w = W[:, cols].T  # (c, 3) body-frame axes
+        # d up = Q (w x up0); d(R_WB z) = -R_WB0 (w x (Q^T z)).
+        dup = np.cross(w[None, :, :], up0[:, None, :]) @ Q.T  # (n, c, 3)
+        J[:, 0, cols] += np.einsum("nci,ni->nc", dup, d)
+        for rows, z_B in ((slice(1, 3), zL_B), (slice(3, 5), zR_B)):
+            qz = z_B @ Q  # Q^T z, as rows
+            dz = -np.einsum("nij,ncj->nci", R_WB0, np.cross(w[None, :, :], qz[:, None, :]))
+            J[:, rows, cols] += np.swapaxes(dz[:, :, :2], 1, 2)
+    return r, J
+
+
 def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fixed"):
     """(N, 6) residuals Log(M^-1 C_k) and (N, 6, 12) Jacobians.
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.estimation.problem import Term
-from legcal_bench.estimation.residuals import feet_residuals, flat_residuals
+from legcal_bench.estimation.residuals import feet_residuals, flat_residuals, flat_residuals_extended
 from legcal_bench.geometry.lie import frechet_mean
 from legcal_bench.robots.kinematics import FrameKinematics, LegKinematics, frame_kinematics
 
@@ -27,7 +27,12 @@ TILT = "tilt"  # Yamane's per-frame root roll and pitch
 
 
 class SegmentKinematics:
-    """A segment's encoder frames and their kinematics at the offsets last asked for."""
+    """A segment's encoder frames and their kinematics at the offsets last asked for.
+    The terms' segment interface: `blocks`, `state(x)` (kinematics at the block values)
+    and `split(J)` (Jacobian columns by block); `legcal_bench.estimation.effects.
+    EffectSegment` is the same with model-gap effects."""
+
+    blocks = (OFFSETS,)
 
     def __init__(self, kin: LegKinematics, q_enc: np.ndarray):
         self.kin, self.q_enc = kin, q_enc
@@ -40,6 +45,12 @@ class SegmentKinematics:
             self._dq = np.array(dq, copy=True)
         return self._fk
 
+    def state(self, x) -> FrameKinematics:
+        return self.at(x[OFFSETS])
+
+    def split(self, J: np.ndarray) -> dict[str, np.ndarray]:
+        return {OFFSETS: J}
+
 
 class InterFootTerm(Term):
     """Contact consistency of one segment: 6 rows per frame, (translation, rotation).
@@ -48,37 +59,40 @@ class InterFootTerm(Term):
     the Jacobian includes dM/d dq); "fixed": the mean is held (`update_mean` sets it),
     as in the paper's alternation."""
 
-    blocks = (OFFSETS,)
-
     def __init__(self, name: str, seg: SegmentKinematics, weights: np.ndarray, mode: str = "projected"):
         self.name, self.seg, self.w, self.mode = name, seg, np.asarray(weights, dtype=float), mode
+        self.blocks = seg.blocks
         self.mean: np.ndarray | None = None
 
-    def update_mean(self, dq: np.ndarray) -> np.ndarray:
-        self.mean = frechet_mean(self.seg.at(dq).C, self.mean, tol=1e-15)
+    def update_mean(self, x) -> np.ndarray:
+        """The segment's Fréchet mean at `x` (block values, or the offsets alone)."""
+        x = x if isinstance(x, dict) else {OFFSETS: x}
+        self.mean = frechet_mean(self.seg.state(x).C, self.mean, tol=1e-15)
         return self.mean
 
     def compute(self, x):
-        dq = x[OFFSETS]
-        fk = self.seg.at(dq)
+        fk = self.seg.state(x)
         if self.mode == "projected":
-            self.update_mean(dq)
+            self.update_mean(x)
         r, J = feet_residuals(fk.C, fk.G, self.mean, self.mode)
-        return (self.w * r).ravel(), {OFFSETS: (self.w[:, None] * J).reshape(-1, 12)}
+        return (self.w * r).ravel(), self.seg.split((self.w[:, None] * J).reshape(-1, J.shape[-1]))
 
 
 class FlatGroundTerm(Term):
     """Flat ground against the IMU vertical: 5 rows per frame."""
 
-    blocks = (OFFSETS,)
-
     def __init__(self, name: str, seg: SegmentKinematics, up_B: np.ndarray, R_WB: np.ndarray, weights: np.ndarray):
         self.name, self.seg, self.up_B, self.R_WB = name, seg, up_B, R_WB
+        self.blocks = seg.blocks
         self.w = np.asarray(weights, dtype=float)
 
     def compute(self, x):
-        r, J = flat_residuals(self.seg.at(x[OFFSETS]), self.up_B, self.R_WB)
-        return (self.w * r).ravel(), {OFFSETS: (self.w[:, None] * J).reshape(-1, 12)}
+        fk = self.seg.state(x)
+        if isinstance(fk, FrameKinematics):
+            r, J = flat_residuals(fk, self.up_B, self.R_WB)
+        else:
+            r, J = flat_residuals_extended(fk, self.up_B, self.R_WB)
+        return (self.w * r).ravel(), self.seg.split((self.w[:, None] * J).reshape(-1, J.shape[-1]))
 
 
 class TikhonovTerm(Term):
@@ -93,6 +107,27 @@ class TikhonovTerm(Term):
 
     def compute(self, x):
         return self.w * x[OFFSETS], {OFFSETS: np.diag(self.w)}
+
+
+class HeldParametersTerm(Term):
+    """weight * p_i for the effect parameters the data cannot determine (`held`, indices
+    into an `EffectModel`'s columns): they stay at zero (a prior, not information)."""
+
+    name = "held_parameters"
+    data = False
+
+    def __init__(self, model, held, weight: float = 1e8):
+        self.model, self.held, self.weight = model, list(held), float(weight)
+        self.blocks = tuple(e.name for e in model.effects)
+
+    def compute(self, x):
+        v = self.model.vector({OFFSETS: np.zeros(12), **x})
+        rows = self.weight * v[self.held]
+        J = np.zeros((len(self.held), self.model.n))
+        J[np.arange(len(self.held)), self.held] = self.weight
+        split = self.model.split(J)
+        split.pop(OFFSETS)
+        return rows, split
 
 
 class KneePriorTerm(Term):

@@ -10,7 +10,7 @@ env episode reset with the same seed and stepped with the same postures.
 from __future__ import annotations
 
 import json
-
+import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -28,6 +28,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, STANCES, feasible_trajec
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
+from legcal_bench.sim.effects import build_reality
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
@@ -39,6 +40,9 @@ class CollectConfig:
     robot: str = "a3"
     mjcf: str | None = None
     sim_robot: str | None = None  # simulate this robot; calibrators get `robot`
+    sim_model: str | None = None  # simulate this MJCF (an edited copy of the robot's): the generic model gap
+    # Reality effects (`legcal_bench.sim.effects`): specs like "compliance:joint=left_knee,k=1e4".
+    effects: tuple[str, ...] = ()
     mode: str = "weld"
     stances: tuple[str, ...] = ("I", "II", "III", "IV")
     offsets: str | tuple[float, ...] = "paper"  # a preset, or 12 radians
@@ -200,12 +204,27 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         raise ConfigError(f"period_scale {cfg.period_scale!r}: use a factor in [0.1, 10] on the posture motion's "
                           "periods (2: twice as slow)")
     legmap = load_robot(cfg.robot, cfg.mjcf)
-    sim_legmap = legmap if cfg.sim_robot is None else load_robot(cfg.sim_robot)
+    sim_legmap = legmap
+    if cfg.sim_robot is not None or cfg.sim_model is not None:
+        sim_legmap = load_robot(cfg.sim_robot or cfg.robot, cfg.sim_model if cfg.sim_model else
+                                (None if cfg.sim_robot else cfg.mjcf))
+    with tempfile.TemporaryDirectory(prefix="legcal_reality_") as workdir:
+        reality = build_reality(legmap, sim_legmap, cfg.effects, sim_sensors(cfg.sensors), workdir, cfg.seed)
+        if reality.needs_physics and cfg.mode == "kinematic":
+            raise ConfigError("--effect compliance needs physics (a spring settles under load): use --mode weld "
+                              "or contact")
+        if reality.floor and cfg.mode == "contact":
+            raise ConfigError("--effect shim is applied to the sole placements: use --mode weld or kinematic")
+        return _collect(cfg, out_dir, progress, legmap, reality)
+
+
+def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality) -> CollectSummary:
+    sim_legmap = reality.sim_legmap
     gains = servo_gains(sim_legmap) if cfg.mode != "kinematic" else None
     sim = DoubleSupportSim(
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
-        sim_sensors(cfg.sensors), sim_legmap=sim_legmap, rate_hz=cfg.rate_hz,
-        knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains)
+        reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
+        knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor)
     catalog, stances = stance_catalog(cfg)
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0]), catalog, stances))
@@ -238,7 +257,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
                 meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
                       "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),
-                      "imu_errors": sim.sensor.errors.to_dict()},
+                      "imu_errors": sim.sensor.errors.to_dict(), "reality": reality.describe(),
+                      "encoder_scale": list(sim.sensor.encoder_scale)},
             ).save(truth_path(path))
             files.append(path.name)
             summary.segments.append(SegmentSummary(

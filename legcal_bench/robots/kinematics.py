@@ -131,6 +131,8 @@ class LegKinematics:
         self.sole_frame = {s: self._add_frame(f"legcal_{s}_sole", legmap.legs[s].sole, f"legs.{s}.sole")
                            for s in SIDES}
         self.imu_frame = self._add_frame("legcal_imu", legmap.imu, "imu")
+        self.ft_frame = ({s: self._add_frame(f"legcal_{s}_ft", legmap.legs[s].ft, f"legs.{s}.ft") for s in SIDES}
+                         if all(legmap.legs[s].ft is not None for s in SIDES) else {})
         self.data = m.createData()
         self.corners = {s: np.array([legmap.legs[s].corners[c] for c in legmap.legs[s].corners]) for s in SIDES}
         self.leg_cols = {"left": np.arange(6), "right": np.arange(6, 12)}
@@ -378,6 +380,23 @@ class LegKinematics:
         """(4, 4) pose of the (nominal) IMU frame in the pelvis frame. The IMU is on no leg
         (checked when the model is loaded), so it does not depend on the leg angles."""
         return self.imu_pose(np.zeros(12)).homogeneous
+
+    @cached_property
+    def T_sole_ft(self) -> dict[str, np.ndarray]:
+        """Per side, the (4, 4) pose of the ankle force/torque frame in the sole frame
+        (constant: both must ride on the foot, after the last leg joint). Raises
+        LegMapError if the leg map has no F/T frames or one sits elsewhere."""
+        if not self.ft_frame:
+            raise LegMapError(f"{self.legmap.source or self.legmap.name}: no ankle force/torque frames (legs.<side>.ft)")
+        m, d = self.model, self.data
+        pin.framesForwardKinematics(m, d, self.q_full(np.zeros(12)))
+        out = {}
+        for s in SIDES:
+            if m.frames[self.ft_frame[s]].parentJoint != m.frames[self.sole_frame[s]].parentJoint:
+                raise LegMapError(f"{self.legmap.source or self.legmap.name}: legs.{s}.ft must be on the foot (moved "
+                                  "by the same joints as the sole) for loads at the joints to come from it")
+            out[s] = d.oMf[self.sole_frame[s]].actInv(d.oMf[self.ft_frame[s]]).homogeneous
+        return out
 
     @cached_property
     def R_BI(self) -> np.ndarray:

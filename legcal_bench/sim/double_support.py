@@ -18,6 +18,13 @@ In weld and contact modes the servos track encoder-space targets from the nomina
 The encoders are offset, so in joint space the servo target is q_cmd + dq: nothing
 reads the offsets, the offsets strain the closed chain as on a real robot.
 
+Reality effects (`legcal_bench.sim.effects`) enter as the simulated robot (an edited
+MJCF), the sensors (encoder scale, IMU mount) and `floor`, a tilt of each sole's
+placement that only the simulated robot feels (a shim): the nominal IK still plans on
+the flat placements. A passive hinge `legcal_compliance_<joint>` in the simulated
+model is a spring between that joint's motor (what the encoder reads and the servo
+drives) and its link: the ground truth's q_true is the link angle, motor + spring.
+
 In the straight-leg standing phase each true knee sits at the simulated robot's
 mechanical straight angle plus `knee_straight_error_rad`, and postures are ignored.
 
@@ -67,7 +74,7 @@ class DoubleSupportSim:
     def __init__(self, legmap: LegMap, mode: str, offsets: np.ndarray, sensor: SimSensors,
                  sim_legmap: LegMap | None = None, rate_hz: float = 50.0, physics_dt: float = 0.001,
                  knee_straight_error_rad: float = 0.005, settle_s: float = 3.0,
-                 servo_gains: ServoGains | None = None):
+                 servo_gains: ServoGains | None = None, floor: dict | None = None):
         self.legmap = legmap
         self.sim_legmap = legmap if sim_legmap is None else sim_legmap
         if self.sim_legmap.joint_names != legmap.joint_names:
@@ -75,7 +82,9 @@ class DoubleSupportSim:
                               f"order, as the nominal robot ({legmap.joint_names})")
         self.mode = mode
         self.nominal = LegKinematics(legmap)
-        self.true_kin = self.nominal if self.sim_legmap is legmap else LegKinematics(self.sim_legmap)
+        # A distinct simulated model whenever the simulated robot differs (a shim included):
+        # `_ik` tells the two apart by identity.
+        self.true_kin = self.nominal if self.sim_legmap is legmap and not floor else LegKinematics(self.sim_legmap)
         self.offsets = np.asarray(offsets, dtype=float)
         self.sensor = sensor
         self.rate_hz = float(rate_hz)
@@ -95,6 +104,16 @@ class DoubleSupportSim:
                     "servo gains: give servo_gains.<joint>: [kp, kd] in the leg map (or collect through "
                     "legcal_bench.protocol, which uses the documented default)")
         self.data = mujoco.MjData(self.scene.model) if self.scene else None
+        self.floor = {s: np.asarray(T, dtype=float) for s, T in (floor or {}).items()}
+        from legcal_bench.sim.effects import compliance_joints
+
+        springs = compliance_joints(self.scene.model, self.sim_legmap.joint_names) if self.scene else []
+        if mode == "kinematic" and any(n.startswith("legcal_compliance_") for n in self._model_joint_names()):
+            raise LegMapError("a compliant joint (legcal_compliance_*) needs physics: use weld or contact mode")
+        if mode == "contact" and self.floor:
+            raise LegMapError("a shim under a sole is modelled by the sole's placement: use weld or kinematic mode")
+        self._spring_cols = np.array([i for i, _ in springs], dtype=int)
+        self._spring_adr = np.array([a for _, a in springs], dtype=int)
         self.has_ft = bool(self.scene and self.scene.has_ft)
         if self.scene is not None:
             sc, adr = self.scene, self.scene.sensor_adr
@@ -107,6 +126,14 @@ class DoubleSupportSim:
         self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
         self.left = self.right = None
         self.standing = False
+
+    def _model_joint_names(self) -> list[str]:
+        return [self.true_kin.model.names[j] for j in range(1, self.true_kin.model.njoints)]
+
+    def _placed(self, side: str, T: pin.SE3) -> pin.SE3:
+        """Where the simulated sole really sits: the placement with its shim (if any)."""
+        F = self.floor.get(side)
+        return T if F is None else T * pin.SE3(F[:3, :3], F[:3, 3])
 
     # ------------------------------------------------------------------ public
     @property
@@ -121,10 +148,11 @@ class DoubleSupportSim:
         """Plant the soles at `left`/`right` (stance frame) with the pelvis at `posture`
         (standing: the straight-leg posture is solved instead), then let the servos settle."""
         self.left, self.right, self.standing = left, right, standing
+        self.true_left, self.true_right = self._placed("left", left), self._placed("right", right)
         self.time = 0.0
         if standing:
             knee = self.sim_legmap.knee_straight_rad + self.knee_straight_error_rad
-            posture, q_true = solve_standing(self.true_kin, left, right, posture, (knee, knee))
+            posture, q_true = solve_standing(self.true_kin, self.true_left, self.true_right, posture, (knee, knee))
             self._posture, self._q_stand = posture, q_true
         else:
             self._posture = np.array(posture, dtype=float)
@@ -154,7 +182,7 @@ class DoubleSupportSim:
         Random draws, in order: IMU, encoders, force/torque."""
         acc, gyro = self._true_imu()
         acc, gyro = self.sensor.imu(acc, gyro, rng)
-        obs = {"q_enc": self.sensor.encoders(self._q_true - self.offsets, rng), "imu_acc": acc, "imu_gyro": gyro}
+        obs = {"q_enc": self.sensor.encoders(self._q_motor() - self.offsets, rng), "imu_acc": acc, "imu_gyro": gyro}
         if self.has_ft:
             obs["ft"] = self.sensor.force_torque(self.data.sensordata[self._ft_adr], rng)
         return obs
@@ -174,10 +202,12 @@ class DoubleSupportSim:
         postures = np.asarray(postures, dtype=float).reshape(-1, 6)
         q = np.full((len(postures), 12), np.nan)
         todo = np.arange(len(postures))
-        start = self._q_true if kin is self.true_kin else self._q_cmd
+        true = kin is self.true_kin
+        start = self._q_true if true else self._q_cmd
+        left, right = (self.true_left, self.true_right) if true else (self.left, self.right)
         while todo.size:
             try:
-                q[todo] = posture_ik(kin, self.left, self.right, postures[todo], start)
+                q[todo] = posture_ik(kin, left, right, postures[todo], start)
                 break
             except IKError as e:
                 todo = np.delete(todo, e.frames)
@@ -230,7 +260,8 @@ class DoubleSupportSim:
     # ---------------------------------------------------------------- internals
     def _ik(self, kin: LegKinematics, posture: np.ndarray, q_init: np.ndarray) -> np.ndarray:
         T_WB = posture_pose(posture)
-        return kin.solve(T_WB.actInv(self.left), T_WB.actInv(self.right), q_init)
+        left, right = (self.true_left, self.true_right) if kin is self.true_kin else (self.left, self.right)
+        return kin.solve(T_WB.actInv(left), T_WB.actInv(right), q_init)
 
     def _step(self, posture: np.ndarray, q_cmd, q_true, R_WB) -> bool:
         """`step` (posture already a fresh float array); `R_WB`, the posture's rotation
@@ -283,7 +314,7 @@ class DoubleSupportSim:
         mujoco.mj_resetData(sc.model, d)
         self._set_state(q_true, posture_pose(self._posture))
         if sc.mocap:
-            for side, T in zip(SIDES, (self.left, self.right)):
+            for side, T in zip(SIDES, (self.true_left, self.true_right)):
                 pq = se3_to_pos_quat(T)
                 d.mocap_pos[sc.mocap[side]], d.mocap_quat[sc.mocap[side]] = pq[:3], pq[3:]
         mujoco.mj_forward(sc.model, d)
@@ -300,6 +331,15 @@ class DoubleSupportSim:
         self._drive(start + (end - start) * self._substep_frac)  # linear over the logging period
         self._target = end
         self._q_true = d.qpos[sc.qpos_adr]
+        if self._spring_cols.size:  # the link angle: motor + series spring
+            self._q_true = self._q_true.copy()
+            self._q_true[self._spring_cols] += d.qpos[self._spring_adr]
+
+    def _q_motor(self) -> np.ndarray:
+        """What the encoders measure: the motor side of any series spring."""
+        if not self._spring_cols.size:
+            return self._q_true
+        return self.data.qpos[self.scene.qpos_adr]
 
     def _kinematic_imu(self) -> tuple[np.ndarray, np.ndarray]:
         # Each frame is a static posture (quasi-static), so the accelerometer reads

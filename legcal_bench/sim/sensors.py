@@ -123,9 +123,14 @@ class SimSensors:
 
     model: SensorModel = SensorModel()
     errors: ImuErrors = ImuErrors()
+    # Realized encoder scale errors (12, leg-map order; empty = none): an encoder reads
+    # (q - offset) / (1 + scale), so q = q_enc + scale q_enc + offset (issue #16's effect).
+    encoder_scale: tuple[float, ...] = ()
 
     def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         m = self.model
+        if self.encoder_scale:
+            q_true_minus_offset = q_true_minus_offset / (1.0 + np.asarray(self.encoder_scale))
         q = q_true_minus_offset + m.encoder_noise_std * rng.standard_normal(q_true_minus_offset.shape)
         if m.encoder_resolution > 0:
             q = np.round(q / m.encoder_resolution) * m.encoder_resolution

@@ -1,0 +1,287 @@
+"""Model-gap effects: what a calibration model may lack beyond the joint offsets, each a
+parameter block that plugs into the assembled problem (issue #16).
+
+An `Effect` names its parameters and enters the kinematics in one or more of three ways:
+
+  joint map     q = q_enc + dq + A_k p, A_k (12, P) per frame from the data (an encoder
+                scale: the encoder angle; a compliance: the joint's load from the ankle
+                force/torque wrenches);
+  chain factors Exp(sum_i p_i g_i) inserted in a leg's chain (`legcal_bench.robots.chain`):
+                link lengths, joint axis directions;
+  IMU axes      the IMU's vertical rotated by Exp(sum_i p_i a_i), a_i axes of the IMU frame
+                (a mounting tilt).
+
+`EffectModel` compiles a list of effects into one parameter layout (offsets first, then
+each effect's block) and `EffectSegment` evaluates a contact segment's kinematics with
+them; the inter-foot and flat-ground terms take it in place of `SegmentKinematics`.
+
+Effects are plug-ins, like calibrators: the entry-point group `legcal_bench.effects`
+maps a name to an `Effect` subclass (the library: `legcal_bench.estimation.effect_library`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from legcal_bench.errors import CalibrationError
+from legcal_bench.geometry.lie import Jr, adjoint, inverse
+from legcal_bench.robots.chain import Factor, FactorChain
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
+from legcal_bench.robots.legmap import SIDES
+
+OFFSETS = "offsets"
+ENTRY_POINT_GROUP = "legcal_bench.effects"
+
+
+@dataclass
+class SegmentData:
+    """What an effect may read of one contact segment's frames."""
+
+    q_enc: np.ndarray  # (N, 12)
+    ft: np.ndarray | None = None  # (N, 2, 6) ankle wrenches [force, torque] in each F/T frame
+    up_B: np.ndarray | None = None  # (N, 3) the IMU's vertical in the pelvis frame
+    q_ref: np.ndarray | None = None  # (N, 12) the angles at which loads are evaluated (default q_enc)
+
+
+class Effect(ABC):
+    """One model-gap effect. Subclasses set `name`, `summary`, `realistic` (the size the
+    README's table injects, as a `collect --effect` spec per robot side/joint) and
+    implement `parameters` and any of `joint_map`, `factors`, `imu_axes`."""
+
+    name: str = ""
+    summary: str = ""
+    needs_ft: bool = False
+
+    def parameters(self, kin: LegKinematics) -> list[tuple[str, str]]:
+        """(name, unit) of each parameter, SI units."""
+        raise NotImplementedError
+
+    def joint_map(self, kin: LegKinematics, seg: SegmentData) -> np.ndarray | None:
+        """(N, 12, P): how the parameters move the joint angles, per frame (or None)."""
+        return None
+
+    def factors(self, kin: LegKinematics) -> list[tuple[str, int, np.ndarray]]:
+        """Chain factors (side, after, generators (P, 6)); rows of generators over this
+        block's parameters (zero rows for parameters a factor does not use)."""
+        return []
+
+    def imu_axes(self, kin: LegKinematics) -> np.ndarray | None:
+        """(P, 3) IMU-frame rotation axis per parameter (zero rows elsewhere), or None."""
+        return None
+
+
+def registry() -> dict[str, type[Effect]]:
+    """Effect classes by name: the entry-point group `legcal_bench.effects`."""
+    from importlib.metadata import entry_points
+
+    out = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        out[ep.name] = ep.load()
+    return out
+
+
+def load_effects(names) -> list[Effect]:
+    reg = registry()
+    out = []
+    for n in names:
+        if n not in reg:
+            raise CalibrationError(f"--with-effects {n!r}: unknown effect; installed: {', '.join(sorted(reg))} "
+                                   f"(entry-point group {ENTRY_POINT_GROUP})")
+        out.append(reg[n]())
+    if len({e.name for e in out}) != len(out):
+        raise CalibrationError(f"--with-effects {list(names)}: an effect is named twice")
+    return out
+
+
+@dataclass
+class EffectModel:
+    """Effects compiled into one parameter layout: columns 0..11 the offsets, then each
+    effect's block in order (`slices`)."""
+
+    kin: LegKinematics
+    effects: list[Effect]
+    names: list[str] = field(default_factory=list)  # per column: joint names, then "<effect>.<parameter>"
+    units: list[str] = field(default_factory=list)
+
+    def __post_init__(self):
+        self.names = list(self.kin.legmap.joint_names)  # one per column: the offsets, then the effects'
+        self.units = ["rad"] * 12
+        self.slices, col = {}, 12
+        factors, imu = [], []
+        for e in self.effects:
+            params = e.parameters(self.kin)
+            if not params:
+                raise CalibrationError(f"effect {e.name}: it has no parameters on this robot")
+            sl = slice(col, col + len(params))
+            self.slices[e.name] = sl
+            self.names += [f"{e.name}.{p}" for p, _ in params]
+            self.units += [u for _, u in params]
+            for side, after, gens in e.factors(self.kin):
+                gens = np.asarray(gens, dtype=float)
+                used = np.flatnonzero(np.abs(gens).sum(axis=1) > 0)
+                factors.append(Factor(side, after, gens[used], np.arange(sl.start, sl.stop)[used] - 12))
+            ax = e.imu_axes(self.kin)
+            if ax is not None:
+                imu.append((sl, np.asarray(ax, dtype=float)))
+            col = sl.stop
+        self.n = col
+        self.chain = FactorChain(self.kin, factors, self.n - 12) if factors else None
+        self.imu = imu
+
+    @property
+    def blocks(self) -> list[tuple[str, int]]:
+        return [(e.name, self.slices[e.name].stop - self.slices[e.name].start) for e in self.effects]
+
+    def vector(self, x: dict) -> np.ndarray:
+        """The packed (n,) vector of block values `x` (missing effect blocks: zero)."""
+        v = np.zeros(self.n)
+        v[:12] = x[OFFSETS]
+        for e in self.effects:
+            if e.name in x:
+                v[self.slices[e.name]] = x[e.name]
+        return v
+
+    def split(self, J: np.ndarray) -> dict[str, np.ndarray]:
+        """Jacobian (rows, n) -> block name -> columns."""
+        out = {OFFSETS: J[:, :12]}
+        for e in self.effects:
+            out[e.name] = J[:, self.slices[e.name]]
+        return out
+
+    def imu_rotation(self, v: np.ndarray):
+        """(Q (3, 3), W (3, n)): the correction of the IMU's vertical in the pelvis frame,
+        up = Q up_measured, and its right-perturbation axes per column (zero elsewhere)."""
+        W = np.zeros((3, self.n))
+        if not self.imu:
+            return np.eye(3), W
+        R_BI = self.kin.R_BI
+        phi = np.zeros(3)
+        for sl, ax in self.imu:
+            phi += v[sl] @ ax
+        from legcal_bench.geometry.lie import Exp
+
+        Q = R_BI @ Exp(np.r_[0, 0, 0, phi])[:3, :3] @ R_BI.T
+        Jso3 = Jr(np.r_[0, 0, 0, phi])[3:, 3:]
+        for sl, ax in self.imu:
+            W[:, sl] = R_BI @ Jso3 @ ax.T
+        return Q, W
+
+
+@dataclass(frozen=True)
+class ExtendedKinematics:
+    """A segment's kinematics at one parameter vector, Jacobians over all n columns."""
+
+    C: np.ndarray  # (N, 4, 4)
+    G: np.ndarray  # (N, 6, n)
+    p_L: np.ndarray
+    p_R: np.ndarray
+    R_L: np.ndarray
+    R_R: np.ndarray
+    JL: np.ndarray  # (N, 6, n) LOCAL left sole Jacobian over all columns
+    JR: np.ndarray
+    imu_Q: np.ndarray  # (3, 3)
+    imu_W: np.ndarray  # (3, n)
+
+
+class EffectSegment:
+    """A contact segment's kinematics with effects; the terms' segment interface
+    (`state`, `split`, `blocks`) like `SegmentKinematics`."""
+
+    def __init__(self, model: EffectModel, seg: SegmentData):
+        self.model, self.data = model, seg
+        self.kin, self.q_enc = model.kin, seg.q_enc
+        self.blocks = (OFFSETS, *[e.name for e in model.effects])
+        maps = []
+        for e in model.effects:
+            A = e.joint_map(model.kin, seg)
+            if A is not None:
+                maps.append((model.slices[e.name], np.asarray(A, dtype=float)))
+        self.maps = maps
+        self._v: np.ndarray | None = None
+        self._ek: ExtendedKinematics | None = None
+
+    def split(self, J: np.ndarray) -> dict[str, np.ndarray]:
+        return self.model.split(J)
+
+    def state(self, x: dict) -> ExtendedKinematics:
+        v = self.model.vector(x)
+        if self._v is None or not np.array_equal(self._v, v):
+            self._ek = self._evaluate(v)
+            self._v = v.copy()
+        return self._ek
+
+    def _evaluate(self, v: np.ndarray) -> ExtendedKinematics:
+        m, n_cols = self.model, self.model.n
+        Q = self.q_enc + v[:12]
+        A_full = np.zeros((len(Q), 12, n_cols))
+        A_full[:, np.arange(12), np.arange(12)] = 1.0
+        for sl, A in self.maps:
+            Q = Q + np.einsum("njp,p->nj", A, v[sl])
+            A_full[:, :, sl] += A
+        if m.chain is None:
+            fk = frame_kinematics(self.kin, Q)
+            TL = _pose(fk.R_L, fk.p_L)
+            TR = _pose(fk.R_R, fk.p_R)
+            JqL, JqR, JpL, JpR = fk.J_L, fk.J_R, None, None
+        else:
+            legs = m.chain.legs(Q, v[12:])
+            (TL, JqL, JpL), (TR, JqR, JpR) = legs["left"], legs["right"]
+        JL = JqL @ A_full[:, :6, :]
+        JR = JqR @ A_full[:, 6:, :]
+        if JpL is not None:
+            JL[:, :, 12:] += JpL
+            JR[:, :, 12:] += JpR
+        C = inverse(TL) @ TR
+        G = JR - adjoint(inverse(C)) @ JL
+        imu_Q, imu_W = m.imu_rotation(v)
+        return ExtendedKinematics(C, G, TL[:, :3, 3], TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], JL, JR, imu_Q,
+                                  imu_W)
+
+
+def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
+    T = np.zeros((len(R), 4, 4))
+    T[:, :3, :3], T[:, :3, 3], T[:, 3, 3] = R, p, 1.0
+    return T
+
+
+def joint_loads(kin: LegKinematics, q_enc: np.ndarray, ft: np.ndarray, up_B: np.ndarray) -> np.ndarray:
+    """(N, 12) the load each leg joint carries from the links below it, in the sense that
+    bends it positively (a series spring of compliance c deflects by c tau): the ankle
+    force/torque wrench w (as the sensor reports it: the force the foot and what it
+    touches exert on the leg above, in the sensor's frame) mapped through the LOCAL
+    Jacobian of the F/T frame at the encoder angles, tau = -J^T w, plus the weight of the
+    links between the joint and the sensor (the sensor cannot see them), from the model's
+    masses and the IMU's vertical `up_B` (N, 3, pelvis frame)."""
+    import pinocchio as pin
+
+    fk = frame_kinematics(kin, q_enc)
+    T = kin.T_sole_ft
+    out = np.empty((len(q_enc), 12))
+    m, d = kin.model, kin.data
+    links = {}
+    for i, s in enumerate(SIDES):
+        J_ft = adjoint(inverse(T[s])) @ (fk.J_L, fk.J_R)[i]  # (N, 6, 6)
+        out[:, 6 * i:6 * i + 6] = -np.einsum("nrj,nr->nj", J_ft, ft[:, i])
+        support = [int(j) for j in m.supports[m.frames[kin.ft_frame[s]].parentJoint]]
+        poe = kin.poe[s]
+        for k, c in enumerate(poe.cols):
+            jid = int(kin.leg_joint_ids[c])
+            # The joint's own link and those after it, up to (not including) the sensor's.
+            links[int(c)] = (jid, poe.S[k][3:], support[support.index(jid):-1])
+    for k in range(len(q_enc)):
+        pin.forwardKinematics(m, d, kin.q_full(q_enc[k]))
+        oMB = d.oMf[kin.pelvis_frame]
+        g = -9.81 * (oMB.rotation @ up_B[k])
+        for c, (jid, local_axis, bodies) in links.items():
+            a = d.oMi[jid]
+            axis = a.rotation @ local_axis
+            tau = 0.0
+            for b in bodies:
+                inertia = m.inertias[b]
+                com = d.oMi[b].act(inertia.lever)
+                tau += axis @ np.cross(com - a.translation, inertia.mass * g)
+            out[k, c] += tau
+    return out

@@ -1,0 +1,78 @@
+"""Model-gap effects in the assembled problem (issue #16): each library effect's
+Jacobian (inter-foot and flat-ground rows, every block) against central differences at
+non-zero parameters, the extended kinematics against the plain path at zero, and the
+registry and its errors."""
+
+import numpy as np
+import pytest
+
+from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects, registry
+from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.problem import Block, Problem
+from legcal_bench.estimation.terms import OFFSETS, FlatGroundTerm, InterFootTerm, SegmentKinematics
+from legcal_bench.robots import load_robot
+from legcal_bench.robots.kinematics import LegKinematics
+
+LIBRARY = ("leg_length", "encoder_scale", "compliance", "imu_tilt", "hip_axis")
+
+
+@pytest.fixture(scope="module", params=["a3", "a2"])
+def data(request):
+    kin = LegKinematics(load_robot(request.param))
+    rng = np.random.default_rng(5)
+    q = kin.q_init() + rng.normal(0, 0.08, (15, 12))
+    acc = np.array([0.2, -0.3, 9.8]) + rng.normal(0, 0.2, (15, 3))
+    ft = np.concatenate([rng.normal(0, 20, (15, 2, 3)) + [0, 0, -250], rng.normal(0, 5, (15, 2, 3))], axis=2)
+    up = up_in_base(acc, kin.R_BI)
+    return kin, SegmentData(q, ft, up), up
+
+
+def _problem(kin, seg, up, effects):
+    model = EffectModel(kin, load_effects(effects))
+    es = EffectSegment(model, seg)
+    feet = InterFootTerm("feet", es, np.arange(1, 7.0), "projected")
+    flat = FlatGroundTerm("flat", es, up, levelling_rotations(up), np.arange(1, 6.0) * 100)
+    blocks = [Block(OFFSETS, 12)] + [Block(n, k) for n, k in model.blocks]
+    return Problem(blocks, [feet, flat]), model
+
+
+def test_the_library_is_registered_as_plug_ins():
+    assert set(LIBRARY) <= set(registry())
+    with pytest.raises(CalibrationError, match="'shank': unknown effect; installed: compliance"):
+        load_effects(["shank"])
+
+
+@pytest.mark.parametrize("effect", LIBRARY)
+def test_each_effect_jacobian_matches_central_differences(data, effect):
+    kin, seg, up = data
+    problem, model = _problem(kin, seg, up, [effect])
+    rng = np.random.default_rng(1)
+    x = np.r_[rng.normal(0, 0.02, 12), rng.normal(0, 1, model.n - 12) * _scale(effect)]
+    _, J = problem.evaluate(x)
+    h = 1e-6 * np.r_[np.ones(12), np.full(model.n - 12, _scale(effect))]
+    fd = np.empty_like(J)
+    for j in range(model.n):
+        e = np.zeros(model.n)
+        e[j] = h[j]
+        fd[:, j] = (problem.evaluate(x + e)[0] - problem.evaluate(x - e)[0]) / (2 * h[j])
+    scale = np.abs(fd).max(axis=0) + 1e-12
+    assert np.abs(J - fd).max(axis=0).max() < 1e-6 * max(1.0, scale.max())
+    assert (np.abs(J - fd).max(axis=0) / scale).max() < 1e-5  # every column, relative to its size
+
+
+def _scale(effect):
+    return {"leg_length": 2e-3, "encoder_scale": 5e-3, "compliance": 1e-4, "imu_tilt": 1e-2, "hip_axis": 1e-2}[effect]
+
+
+def test_at_zero_parameters_the_extended_kinematics_is_the_plain_one(data):
+    kin, seg, up = data
+    problem, model = _problem(kin, seg, up, list(LIBRARY))
+    x = np.r_[np.full(12, 0.01), np.zeros(model.n - 12)]
+    plain = SegmentKinematics(kin, seg.q_enc)
+    ref = Problem([Block(OFFSETS, 12)], [InterFootTerm("feet", plain, np.arange(1, 7.0), "projected"),
+                                        FlatGroundTerm("flat", plain, up, levelling_rotations(up),
+                                                       np.arange(1, 6.0) * 100)])
+    r0, J0 = ref.evaluate(x[:12])
+    r1, J1 = problem.evaluate(x)
+    assert np.abs(r1 - r0).max() < 1e-12 and np.abs(J1[:, :12] - J0).max() < 1e-9
