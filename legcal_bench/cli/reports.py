@@ -60,6 +60,32 @@ def cmd_regression(a: argparse.Namespace) -> int:
     return 1 if problems else 0
 
 
+def cmd_effects_table(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.files.reports import write_report
+    from legcal_bench.provenance import code_version, describe
+    from legcal_bench.reports.effects_table import EFFECTS, build, markdown, plot
+
+    unknown = sorted(set(a.effects) - set(EFFECTS))
+    if unknown:
+        raise ConfigError(f"--effects {unknown}: use library effects from {list(EFFECTS)}")
+    if a.seeds < 1:
+        raise ConfigError(f"--seeds {a.seeds}: need at least 1")
+    made_by = (f"legcal-bench effects-table --robots {' '.join(a.robots)} --effects {' '.join(a.effects)} "
+               f"--seeds {a.seeds}")
+    code = code_version()
+    data = build(a.robots, a.effects, a.seeds, a.workers, progress=not a.quiet)
+    data.update(made_by=made_by, code=code)
+    md = markdown(data, made_by, describe(code))
+    write_report(a.out, md, data, name="effects_table")
+    plot(data, Path(a.out) / "effects_table.png")
+    print(md)
+    print(f"wrote {a.out}/effects_table.md, .json, .png")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import G1_EXAMPLE
 
@@ -95,6 +121,18 @@ def add_commands(sub) -> None:
     rc.add_argument("--out", default="reports/robots_check")
     rc.add_argument("--quiet", action="store_true")
     rc.set_defaults(func=cmd_robots_check)
+
+    from legcal_bench.reports.effects_table import EFFECTS
+
+    et = sub.add_parser("effects-table", help="model gap: for each library effect at a realistic size, the offsets-"
+                                              "only fit and the fit with the effect added, beside the clean floor")
+    et.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
+    et.add_argument("--effects", nargs="+", default=list(EFFECTS))
+    et.add_argument("--seeds", type=int, default=10)
+    et.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    et.add_argument("--out", default="reports/effects")
+    et.add_argument("--quiet", action="store_true")
+    et.set_defaults(func=cmd_effects_table)
 
     rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
     rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")

@@ -87,9 +87,13 @@ class Truth:
     imu_true_acc: np.ndarray  # (N, 3)
     imu_true_gyro: np.ndarray  # (N, 3)
     meta: dict = field(default_factory=dict)
+    # (N, 12) what the encoders read without noise (q_true - offsets unless a reality
+    # effect, e.g. an encoder scale or a series spring, says otherwise); optional.
+    q_enc_clean: np.ndarray | None = None
 
     def save(self, path: str | Path) -> Path:
-        arrays = {k: getattr(self, k) for k in self.__dataclass_fields__ if k != "meta"}
+        arrays = {k: getattr(self, k) for k in self.__dataclass_fields__
+                  if k != "meta" and getattr(self, k) is not None}
         return _save_npz(path, arrays, {"format": FORMAT + "-truth", "version": VERSION, **self.meta})
 
 
@@ -239,11 +243,12 @@ def load_truth(path: str | Path) -> Truth:
     """The simulator's ground truth for the recording at `path` (scoring only)."""
     tp = truth_path(path)
     arrays, meta = _read_npz(tp)
+    optional = ("q_enc_clean",)
     fields_ = [k for k in Truth.__dataclass_fields__ if k != "meta"]
-    missing = [k for k in fields_ if k not in arrays]
+    missing = [k for k in fields_ if k not in arrays and k not in optional]
     if missing:
         raise RecordingError(f"{tp}: missing ground-truth fields {missing}")
-    return Truth(**{k: arrays[k] for k in fields_}, meta=meta)
+    return Truth(**{k: arrays[k] for k in fields_ if k in arrays}, meta=meta)
 
 
 def write_manifest(out_dir: str | Path, manifest: dict) -> Path:

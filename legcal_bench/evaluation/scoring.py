@@ -138,7 +138,7 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
                 store_n.append(a.ravel())
             if p in truths:
                 t = truths[p]
-                q_enc_true = t.q_true - t.offsets
+                q_enc_true = t.q_enc_clean if t.q_enc_clean is not None else t.q_true - t.offsets
                 up_true = np.array([(pos_quat_to_se3(x).rotation.T @ [0, 0, 1.0]) for x in t.pelvis_pose_world])
                 for store_h, store_n, corr in ((ht0, nt0, 0.0), (ht1, nt1, dq)):
                     h, a = _errors_at(kin, q_enc_true + corr, up_true)

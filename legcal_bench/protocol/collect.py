@@ -254,6 +254,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 pelvis_pose_world=tr["pelvis_pose_world"], posture=tr["posture"],
                 posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
                 imu_true_gyro=tr["imu_true_gyro"],
+                q_enc_clean=(tr["q_motor"] - sim.offsets) / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0)),
                 meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
                       "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),

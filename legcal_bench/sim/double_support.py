@@ -358,7 +358,8 @@ class DoubleSupportSim:
     # A frame's raw state goes into preallocated arrays (`_record`); `_truth` converts
     # any number of frames at once (poses to [x y z qw qx qy qz], sole drift).
     def _buffers(self, n: int) -> dict[str, np.ndarray]:
-        buf = {"time": np.empty(n), "q_true": np.empty((n, 12)), "posture": np.empty((n, 6)),
+        buf = {"time": np.empty(n), "q_true": np.empty((n, 12)), "q_motor": np.empty((n, 12)),
+               "posture": np.empty((n, 6)),
                "posture_reachable": np.empty(n, dtype=bool), "imu_true_acc": np.empty((n, 3)),
                "imu_true_gyro": np.empty((n, 3))}
         if self.mode != "kinematic":
@@ -369,6 +370,7 @@ class DoubleSupportSim:
     def _record(self, buf: dict[str, np.ndarray], i: int) -> None:
         buf["time"][i] = self.time
         buf["q_true"][i] = self._q_true
+        buf["q_motor"][i] = self._q_motor() if self.scene is not None else self._q_true
         buf["posture"][i] = self._posture
         buf["posture_reachable"][i] = self.reachable
         buf["imu_true_acc"][i], buf["imu_true_gyro"][i] = self._true_imu()
@@ -404,6 +406,7 @@ class DoubleSupportSim:
         return {
             "time": buf["time"],
             "q_true": buf["q_true"],
+            "q_motor": buf["q_motor"],  # what the encoders measure (the motor side of any series spring)
             "offsets": np.tile(self.offsets, (n, 1)),
             "posture": buf["posture"],
             "posture_reachable": buf["posture_reachable"],

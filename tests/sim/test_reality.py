@@ -57,6 +57,7 @@ def test_encoder_scale_and_imu_tilt_enter_the_sensor_path(tmp_path):
     assert np.abs(angle - 0.5).max() < 0.02  # the roll tilt less its small share along the vertical
     assert "encoder_scale" not in str(rec.meta()) and "imu_tilt" not in str(rec.meta())  # only the truth says
     assert [e["kind"] for e in tr.meta["reality"]["effects"]] == ["encoder_scale", "imu_tilt"]
+    assert np.abs(tr.q_enc_clean - rec.q_enc).max() < 1e-15  # the noise-free reading, scale included
 
 
 def test_a_series_spring_deflects_by_its_load_over_k(tmp_path):
