@@ -214,7 +214,8 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
             raise ConfigError("--effect compliance needs physics (a spring settles under load): use --mode weld "
                               "or contact")
         if reality.floor and cfg.mode == "contact":
-            raise ConfigError("--effect shim is applied to the sole placements: use --mode weld or kinematic")
+            raise ConfigError("--effect shim and slope are applied to the sole placements: use --mode weld or "
+                              "kinematic")
         return _collect(cfg, out_dir, progress, legmap, reality)
 
 

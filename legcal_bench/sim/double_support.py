@@ -131,9 +131,11 @@ class DoubleSupportSim:
         return [self.true_kin.model.names[j] for j in range(1, self.true_kin.model.njoints)]
 
     def _placed(self, side: str, T: pin.SE3) -> pin.SE3:
-        """Where the simulated sole really sits: the placement with its shim (if any)."""
-        F = self.floor.get(side)
-        return T if F is None else T * pin.SE3(F[:3, :3], F[:3, 3])
+        """Where the simulated sole really sits: the placement on the sloped floor (if
+        any, about the stance frame's origin), with its shim (if any, about the sole)."""
+        F, S = self.floor.get(side), self.floor.get("slope")
+        T = T if F is None else T * pin.SE3(F[:3, :3], F[:3, 3])
+        return T if S is None else pin.SE3(S[:3, :3], S[:3, 3]) * T
 
     # ------------------------------------------------------------------ public
     @property

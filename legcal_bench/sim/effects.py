@@ -23,6 +23,9 @@ collection seed. Units at this edge: degrees, millimetres, N m/rad, fractions.
                                        `legcal_compliance_<joint>` on the same body and axis
   shim:side=left,roll=0.5,pitch=0      a wedge under one sole (deg): that sole's placement
                                        tilted about its own origin (weld, kinematic modes)
+  slope:roll=0.3,pitch=0               the floor tilted (deg): both placements rotated about
+                                       the stance frame's origin, gravity unchanged (weld,
+                                       kinematic modes)
 
 The generic route for an effect nobody anticipated is an edited MJCF given as the
 simulated model (`collect --sim-model`).
@@ -65,6 +68,7 @@ KINDS = {k.name: k for k in (
                "series spring between motor and link (N m/rad)"),
     EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0)},
                "wedge under one sole (deg)"),
+    EffectKind("slope", {"roll": ("number", 0.0), "pitch": ("number", 0.0)}, "floor slope (deg)"),
 )}
 EFFECTS_HELP = ("NAME:key=value,... with NAME one of " + "; ".join(
     f"{k.name} ({', '.join(k.keys)}: {k.help})" for k in KINDS.values()))
@@ -142,7 +146,7 @@ class Reality:
 
     sim_legmap: LegMap
     sensors: SimSensors
-    floor: dict = field(default_factory=dict)  # side -> (4, 4) tilt of that sole's placement
+    floor: dict = field(default_factory=dict)  # side -> (4, 4) tilt of that sole's placement; "slope" -> floor tilt
     truth: list = field(default_factory=list)  # one dict per effect: its resolved target and SI values
     needs_physics: bool = False
 
@@ -184,6 +188,12 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
             T[:3, :3] = Rotation.from_euler("xy", np.deg2rad([v["roll"], v["pitch"]])).as_matrix()
             floor[side] = floor.get(side, np.eye(4)) @ T
             truth.append({"effect": e.spec, "kind": e.kind, "side": side, "roll_rad": float(np.deg2rad(v["roll"])),
+                          "pitch_rad": float(np.deg2rad(v["pitch"]))})
+        elif e.kind == "slope":
+            T = np.eye(4)
+            T[:3, :3] = Rotation.from_euler("xy", np.deg2rad([v["roll"], v["pitch"]])).as_matrix()
+            floor["slope"] = T @ floor.get("slope", np.eye(4))
+            truth.append({"effect": e.spec, "kind": e.kind, "roll_rad": float(np.deg2rad(v["roll"])),
                           "pitch_rad": float(np.deg2rad(v["pitch"]))})
         elif e.kind == "link_length":
             link = v["link"]

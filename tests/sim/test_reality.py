@@ -100,3 +100,16 @@ def test_bad_effect_specs_name_the_fix(tmp_path):
     with pytest.raises(ConfigError, match="compliance needs physics"):
         collect(CollectConfig(robot="a3", mode="kinematic", **SHORT, effects=("compliance:k=1e4",)), tmp_path / "x",
                 progress=False)
+
+
+def test_a_slope_tilts_both_soles_alike(tmp_path):
+    cfg = CollectConfig(robot="a3", mode="kinematic", sensors="zero", offsets="none", **SHORT,
+                        effects=("slope:pitch=0.4",))
+    collect(cfg, tmp_path / "s", progress=False)
+    tr = load_truth(tmp_path / "s" / "stance_I.npz")
+    from scipy.spatial.transform import Rotation
+
+    for side in (0, 1):
+        q = tr.sole_poses_world[:, side, 3:]
+        normal = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()[:, :, 2]  # each sole's normal in the world
+        assert np.abs(normal - [np.sin(np.radians(0.4)), 0, np.cos(np.radians(0.4))]).max() < 1e-9
