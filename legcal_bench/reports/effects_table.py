@@ -61,6 +61,8 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.data.recording import list_segments, load_recording, load_session, load_truth
     from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
+    from legcal_bench.estimation.residuals import foot_height_difference
+    from legcal_bench.evaluation.metrics import rms
     from legcal_bench.geometry.poses import pos_quat_to_se3
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
@@ -96,12 +98,11 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
             for key, x in (("before", x_before), ("after", x_after)):
                 seg = EffectSegment(model, SegmentData(t.q_enc_clean, rec.ft, up, q_ref=t.q_enc_clean + x[:12]))
                 ek = seg.state(_blocks(model, x))
-                heights[key].append(np.einsum("ni,ni->n", up, ek.p_L - ek.p_R))
+                heights[key].append(foot_height_difference(ek, up))
         row = {"robot": legmap.name, "robot_spec": robot, "effect": effect, "spec": spec, "seed": seed,
-               "offsets_rms_deg": {"before": float(np.rad2deg(np.sqrt(np.mean((before - injected) ** 2)))),
-                                   "after": float(np.rad2deg(np.sqrt(np.mean((after - injected) ** 2))))},
-               "heldout_true_mm": {k: float(1e3 * np.sqrt(np.mean(np.concatenate(v) ** 2)))
-                                   for k, v in heights.items()},
+               "offsets_rms_deg": {"before": float(np.rad2deg(rms(before - injected))),
+                                   "after": float(np.rad2deg(rms(after - injected)))},
+               "heldout_true_mm": {k: float(1e3 * rms(np.concatenate(v))) for k, v in heights.items()},
                "seconds": result.timing_s.get("total")}
         if eff is not None:
             true = true_parameters(truth.meta["reality"]["effects"])
