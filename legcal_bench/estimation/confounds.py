@@ -55,7 +55,7 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
         cos = np.cos(angles)
         # The effect direction closest to the offsets' span and the offsets it mimics.
         QE, Qq = orth(JE), orth(Jq)
-        U, s, Vt = np.linalg.svd(Qq.T @ QE)
+        U, _, Vt = np.linalg.svd(Qq.T @ QE)
         mimic = np.linalg.lstsq(Jq, Qq @ U[:, 0], rcond=None)[0]
         b = np.linalg.lstsq(JE, QE @ Vt[0], rcond=None)[0]
         names = [model.names[i] for i in range(sl.start, sl.stop)]

@@ -21,13 +21,13 @@ maps a name to an `Effect` subclass (the library: `legcal_bench.estimation.effec
 
 from __future__ import annotations
 
-from abc import ABC
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from legcal_bench.errors import CalibrationError
-from legcal_bench.geometry.lie import Jr, adjoint, inverse
+from legcal_bench.errors import CalibrationError, LegMapError
+from legcal_bench.geometry.lie import Exp, Jr, adjoint, inverse
 from legcal_bench.robots.chain import Factor, FactorChain
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 from legcal_bench.robots.legmap import SIDES
@@ -47,17 +47,17 @@ class SegmentData:
 
 
 class Effect(ABC):
-    """One model-gap effect. Subclasses set `name`, `summary`, `realistic` (the size the
-    README's table injects, as a `collect --effect` spec per robot side/joint) and
-    implement `parameters` and any of `joint_map`, `factors`, `imu_axes`."""
+    """One model-gap effect. Subclasses set `name` and `summary` (and `needs_ft` if they
+    read the ankle wrenches), implement `parameters` and any of `joint_map`, `factors`,
+    `imu_axes`."""
 
     name: str = ""
     summary: str = ""
     needs_ft: bool = False
 
+    @abstractmethod
     def parameters(self, kin: LegKinematics) -> list[tuple[str, str]]:
         """(name, unit) of each parameter, SI units."""
-        raise NotImplementedError
 
     def joint_map(self, kin: LegKinematics, seg: SegmentData) -> np.ndarray | None:
         """(N, 12, P): how the parameters move the joint angles, per frame (or None)."""
@@ -144,6 +144,13 @@ class EffectModel:
                 v[self.slices[e.name]] = x[e.name]
         return v
 
+    def values(self, v: np.ndarray) -> dict[str, np.ndarray]:
+        """The packed (n,) vector `v` -> block name -> values (`vector`'s inverse)."""
+        out = {OFFSETS: v[:12]}
+        for e in self.effects:
+            out[e.name] = v[self.slices[e.name]]
+        return out
+
     def split(self, J: np.ndarray) -> dict[str, np.ndarray]:
         """Jacobian (rows, n) -> block name -> columns."""
         out = {OFFSETS: J[:, :12]}
@@ -161,7 +168,6 @@ class EffectModel:
         phi = np.zeros(3)
         for sl, ax in self.imu:
             phi += v[sl] @ ax
-        from legcal_bench.geometry.lie import Exp
 
         Q = R_BI @ Exp(np.r_[0, 0, 0, phi])[:3, :3] @ R_BI.T
         Jso3 = Jr(np.r_[0, 0, 0, phi])[3:, 3:]
@@ -252,36 +258,37 @@ def joint_loads(kin: LegKinematics, q_enc: np.ndarray, ft: np.ndarray, up_B: np.
     bends it positively (a series spring of compliance c deflects by c tau): the ankle
     force/torque wrench w (as the sensor reports it: the force the foot and what it
     touches exert on the leg above, in the sensor's frame) mapped through the LOCAL
-    Jacobian of the F/T frame at the encoder angles, tau = -J^T w, plus the weight of the
+    Jacobian of the F/T frame at the angles `q_enc`, tau = -J^T w, plus the weight of the
     links between the joint and the sensor (the sensor cannot see them), from the model's
-    masses and the IMU's vertical `up_B` (N, 3, pelvis frame)."""
-    import pinocchio as pin
-
+    masses and the IMU's vertical `up_B` (N, 3, pelvis frame). Batched over frames on
+    the legs' products of exponentials."""
     fk = frame_kinematics(kin, q_enc)
     T = kin.T_sole_ft
     out = np.empty((len(q_enc), 12))
-    m, d = kin.model, kin.data
-    links = {}
+    m = kin.model
+    weight = -9.81 * np.asarray(up_B, dtype=float)  # gravity per unit mass, pelvis frame (N, 3)
     for i, s in enumerate(SIDES):
         J_ft = adjoint(inverse(T[s])) @ (fk.J_L, fk.J_R)[i]  # (N, 6, 6)
         out[:, 6 * i:6 * i + 6] = -np.einsum("nrj,nr->nj", J_ft, ft[:, i])
-        support = [int(j) for j in m.supports[m.frames[kin.ft_frame[s]].parentJoint]]
         poe = kin.poe[s]
+        chain = [int(kin.leg_joint_ids[c]) for c in poe.cols]
+        support = [int(j) for j in m.supports[m.frames[kin.ft_frame[s]].parentJoint]]
+        below = support[support.index(chain[0]):-1]  # leg links up to (not including) the sensor's
+        if any(j not in chain for j in below):
+            raise LegMapError(f"{kin.legmap.source or kin.legmap.name}: legs.{s}: a joint that is not a leg joint "
+                              "sits between the hip and the F/T sensor; loads from the F/T cannot be computed")
+        frames, P = [], np.broadcast_to(np.eye(4), (len(q_enc), 4, 4))
+        for k in range(6):  # joint k's frame in the pelvis frame, at the angles
+            P = P @ poe.M[k] @ Exp(poe.S[k][None] * q_enc[:, poe.cols[k], None])
+            frames.append(P)
+        com = {}  # chain index -> (mass, (N, 3) centre of mass)
+        for j in below:
+            k, inertia = chain.index(j), m.inertias[j]
+            com[k] = (inertia.mass, frames[k][:, :3, :3] @ inertia.lever + frames[k][:, :3, 3])
         for k, c in enumerate(poe.cols):
-            jid = int(kin.leg_joint_ids[c])
-            # The joint's own link and those after it, up to (not including) the sensor's.
-            links[int(c)] = (jid, poe.S[k][3:], support[support.index(jid):-1])
-    for k in range(len(q_enc)):
-        pin.forwardKinematics(m, d, kin.q_full(q_enc[k]))
-        oMB = d.oMf[kin.pelvis_frame]
-        g = -9.81 * (oMB.rotation @ up_B[k])
-        for c, (jid, local_axis, bodies) in links.items():
-            a = d.oMi[jid]
-            axis = a.rotation @ local_axis
-            tau = 0.0
-            for b in bodies:
-                inertia = m.inertias[b]
-                com = d.oMi[b].act(inertia.lever)
-                tau += axis @ np.cross(com - a.translation, inertia.mass * g)
-            out[k, c] += tau
+            axis = frames[k][:, :3, :3] @ poe.S[k][3:]
+            anchor = frames[k][:, :3, 3]
+            moment = sum((mass * np.cross(p - anchor, weight) for kk, (mass, p) in com.items() if kk >= k),
+                         np.zeros((len(q_enc), 3)))
+            out[:, c] += np.einsum("ni,ni->n", axis, moment)
     return out

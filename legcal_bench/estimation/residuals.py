@@ -37,25 +37,32 @@ def foot_height_difference(fk: FrameKinematics, up_B: np.ndarray) -> np.ndarray:
     return np.einsum("ni,ni->n", up_B, fk.p_L - fk.p_R)
 
 
+def _flat_rows(up: np.ndarray, R_WB: np.ndarray, p_L, p_R, R_L, R_R, JL: np.ndarray, JR: np.ndarray):
+    """The flat-ground rows (N, 5) and their Jacobians through each sole, (N, 5, a) from
+    the left sole's LOCAL Jacobian JL (N, 6, a) and (N, 5, b) from the right's."""
+    n = len(up)
+    r = np.empty((n, 5))
+    r[:, 0] = np.einsum("ni,ni->n", up, p_L - p_R)
+    zL = np.einsum("nij,nj->ni", R_WB, R_L[:, :, 2])
+    zR = np.einsum("nij,nj->ni", R_WB, R_R[:, :, 2])
+    r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]
+    GL, GR = np.zeros((n, 5, JL.shape[-1])), np.zeros((n, 5, JR.shape[-1]))
+    # Height: u . (R_L v_L - R_R v_R), v the local linear velocity.
+    u = up[:, None, :]
+    GL[:, 0] = (u @ R_L @ JL[:, :3])[:, 0]
+    GR[:, 0] = -(u @ R_R @ JR[:, :3])[:, 0]
+    # Normals: d(R_WB R e_z) = R_WB R (omega x e_z).
+    GL[:, 1:3] = R_WB[:, :2] @ R_L @ _EZ_CROSS @ JL[:, 3:]
+    GR[:, 3:5] = R_WB[:, :2] @ R_R @ _EZ_CROSS @ JR[:, 3:]
+    return r, GL, GR
+
+
 def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with_jacobian: bool = True):
     """(N, 5) flat-ground residuals and (N, 5, 12) their Jacobians."""
-    n = len(up_B)
-    r = np.empty((n, 5))
-    r[:, 0] = foot_height_difference(fk, up_B)
-    zL = np.einsum("nij,nj->ni", R_WB, fk.R_L[:, :, 2])
-    zR = np.einsum("nij,nj->ni", R_WB, fk.R_R[:, :, 2])
-    r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]
+    r, GL, GR = _flat_rows(up_B, R_WB, fk.p_L, fk.p_R, fk.R_L, fk.R_R, fk.J_L, fk.J_R)
     if not with_jacobian:
         return r, None
-    J = np.zeros((n, 5, 12))
-    # Height: u . (R_L v_L - R_R v_R), v the local linear velocity.
-    u = up_B[:, None, :]
-    J[:, 0, :6] = (u @ fk.R_L @ fk.J_L[:, :3])[:, 0]
-    J[:, 0, 6:] = -(u @ fk.R_R @ fk.J_R[:, :3])[:, 0]
-    # Normals: d(R_WB R e_z) = R_WB R (omega x e_z).
-    J[:, 1:3, :6] = R_WB[:, :2] @ fk.R_L @ _EZ_CROSS @ fk.J_L[:, 3:]
-    J[:, 3:5, 6:] = R_WB[:, :2] @ fk.R_R @ _EZ_CROSS @ fk.J_R[:, 3:]
-    return r, J
+    return r, np.concatenate([GL, GR], axis=2)
 
 
 def flat_residuals_extended(ek, up0: np.ndarray, R_WB0: np.ndarray):
@@ -64,28 +71,15 @@ def flat_residuals_extended(ek, up0: np.ndarray, R_WB0: np.ndarray):
     corrected, up = Q up0 and R_WB = R_WB0 Q^T, with dQ = Q [w]x per column (w in imu_W).
     Returns (N, 5) residuals and (N, 5, n) Jacobians."""
     Q, W = ek.imu_Q, ek.imu_W
-    up = up0 @ Q.T
-    R_WB = R_WB0 @ Q.T
-    n = len(up0)
-    r = np.empty((n, 5))
-    d = ek.p_L - ek.p_R
-    r[:, 0] = np.einsum("ni,ni->n", up, d)
-    zL_B, zR_B = ek.R_L[:, :, 2], ek.R_R[:, :, 2]
-    zL = np.einsum("nij,nj->ni", R_WB, zL_B)
-    zR = np.einsum("nij,nj->ni", R_WB, zR_B)
-    r[:, 1:3], r[:, 3:5] = zL[:, :2], zR[:, :2]
-    J = np.zeros((n, 5, ek.JL.shape[-1]))
-    u = up[:, None, :]
-    J[:, 0] = (u @ ek.R_L @ ek.JL[:, :3])[:, 0] - (u @ ek.R_R @ ek.JR[:, :3])[:, 0]
-    J[:, 1:3] = R_WB[:, :2] @ ek.R_L @ _EZ_CROSS @ ek.JL[:, 3:]
-    J[:, 3:5] = R_WB[:, :2] @ ek.R_R @ _EZ_CROSS @ ek.JR[:, 3:]
+    r, GL, GR = _flat_rows(up0 @ Q.T, R_WB0 @ Q.T, ek.p_L, ek.p_R, ek.R_L, ek.R_R, ek.JL, ek.JR)
+    J = GL + GR
     cols = np.flatnonzero(np.abs(W).sum(axis=0) > 0)
     if cols.size:
         w = W[:, cols].T  # (c, 3) body-frame axes
         # d up = Q (w x up0); d(R_WB z) = -R_WB0 (w x (Q^T z)).
         dup = np.cross(w[None, :, :], up0[:, None, :]) @ Q.T  # (n, c, 3)
-        J[:, 0, cols] += np.einsum("nci,ni->nc", dup, d)
-        for rows, z_B in ((slice(1, 3), zL_B), (slice(3, 5), zR_B)):
+        J[:, 0, cols] += np.einsum("nci,ni->nc", dup, ek.p_L - ek.p_R)
+        for rows, z_B in ((slice(1, 3), ek.R_L[:, :, 2]), (slice(3, 5), ek.R_R[:, :, 2])):
             qz = z_B @ Q  # Q^T z, as rows
             dz = -np.einsum("nij,ncj->nci", R_WB0, np.cross(w[None, :, :], qz[:, None, :]))
             J[:, rows, cols] += np.swapaxes(dz[:, :, :2], 1, 2)

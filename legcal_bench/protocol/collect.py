@@ -210,12 +210,6 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
                                 (None if cfg.sim_robot else cfg.mjcf))
     with tempfile.TemporaryDirectory(prefix="legcal_reality_") as workdir:
         reality = build_reality(legmap, sim_legmap, cfg.effects, sim_sensors(cfg.sensors), workdir, cfg.seed)
-        if reality.needs_physics and cfg.mode == "kinematic":
-            raise ConfigError("--effect compliance needs physics (a spring settles under load): use --mode weld "
-                              "or contact")
-        if reality.floor and cfg.mode == "contact":
-            raise ConfigError("--effect shim and slope are applied to the sole placements: use --mode weld or "
-                              "kinematic")
         return _collect(cfg, out_dir, progress, legmap, reality)
 
 

@@ -97,7 +97,7 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
             up = np.array([pos_quat_to_se3(x).rotation.T @ [0, 0, 1.0] for x in t.pelvis_pose_world])
             for key, x in (("before", x_before), ("after", x_after)):
                 seg = EffectSegment(model, SegmentData(t.q_enc_clean, rec.ft, up, q_ref=t.q_enc_clean + x[:12]))
-                ek = seg.state(_blocks(model, x))
+                ek = seg.state(model.values(x))
                 heights[key].append(foot_height_difference(ek, up))
         row = {"robot": legmap.name, "robot_spec": robot, "effect": effect, "spec": spec, "seed": seed,
                "offsets_rms_deg": {"before": float(np.rad2deg(rms(before - injected))),
@@ -117,15 +117,6 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
                        confounded=c["confounded_with_offsets"], held=eff["confounds"]["held"],
                        mimics=c["mimics_offsets"] if c["confounded_with_offsets"] else "")
         return row
-
-
-def _blocks(model, x: np.ndarray) -> dict:
-    from legcal_bench.estimation.effects import OFFSETS
-
-    out = {OFFSETS: x[:12]}
-    for e in model.effects:
-        out[e.name] = x[model.slices[e.name]]
-    return out
 
 
 def _case(args):

@@ -41,11 +41,12 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from legcal_bench.errors import IKError, LegMapError
+from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SimSensors
 
@@ -105,13 +106,13 @@ class DoubleSupportSim:
                     "legcal_bench.protocol, which uses the documented default)")
         self.data = mujoco.MjData(self.scene.model) if self.scene else None
         self.floor = {s: np.asarray(T, dtype=float) for s, T in (floor or {}).items()}
-        from legcal_bench.sim.effects import compliance_joints
-
         springs = compliance_joints(self.scene.model, self.sim_legmap.joint_names) if self.scene else []
-        if mode == "kinematic" and any(n.startswith("legcal_compliance_") for n in self._model_joint_names()):
-            raise LegMapError("a compliant joint (legcal_compliance_*) needs physics: use weld or contact mode")
+        if mode == "kinematic" and any(n.startswith(COMPLIANCE_PREFIX) for n in self._model_joint_names()):
+            raise ConfigError("a series spring (compliance, joints legcal_compliance_*) needs physics: it settles "
+                              "under load; use --mode weld or contact")
         if mode == "contact" and self.floor:
-            raise LegMapError("a shim under a sole is modelled by the sole's placement: use weld or kinematic mode")
+            raise ConfigError("a shim or a slope is applied to the sole placements, which contact mode does not "
+                              "use: use --mode weld or kinematic")
         self._spring_cols = np.array([i for i, _ in springs], dtype=int)
         self._spring_adr = np.array([a for _, a in springs], dtype=int)
         self.has_ft = bool(self.scene and self.scene.has_ft)

@@ -148,18 +148,9 @@ class Reality:
     sensors: SimSensors
     floor: dict = field(default_factory=dict)  # side -> (4, 4) tilt of that sole's placement; "slope" -> floor tilt
     truth: list = field(default_factory=list)  # one dict per effect: its resolved target and SI values
-    needs_physics: bool = False
 
     def describe(self) -> dict:
         return {"effects": self.truth, "sim_model": str(self.sim_legmap.mjcf)}
-
-
-def chain_joints(legmap: LegMap, side: str) -> list[int]:
-    """Leg-map indices of one leg's joints in chain order (pelvis to foot), from the
-    kinematic model."""
-    from legcal_bench.robots.kinematics import LegKinematics
-
-    return [int(c) for c in LegKinematics(legmap).poe[side].cols]
 
 
 def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors, workdir: str | Path,
@@ -220,7 +211,7 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
                       encoder_scale=tuple(float(x) for x in scale) if np.any(scale) else ())
     if edits:
         sim_legmap = _edited_model(sim_legmap, edits, Path(workdir))
-    return Reality(sim_legmap, sensors, floor, truth, needs_physics=any(k == "compliance" for k, _ in edits))
+    return Reality(sim_legmap, sensors, floor, truth)
 
 
 def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
