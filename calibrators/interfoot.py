@@ -84,6 +84,23 @@ class _Prepared:
     R_WB: np.ndarray
     frames: np.ndarray
     ft: np.ndarray | None = None  # (N, 2, 6) ankle wrenches of these frames, if recorded
+    recording: str = ""  # the stance recording the segment comes from
+
+
+@dataclass
+class Prepared:
+    """Sessions ready to fit (`InterFootCalibrator.prepare`)."""
+
+    robot: LegMap
+    kin: LegKinematics
+    stances: list[Recording]
+    segments: list[_Prepared]
+    w: "InterFootWeights"
+    setting_name: str
+    prior: np.ndarray | None
+    knees: list[int]
+    reports: list
+    warnings: list[str]
 
 
 class InterFootCalibrator(Calibrator):
@@ -172,8 +189,9 @@ class InterFootCalibrator(Calibrator):
         name = operating_setting(legmap) if self.setting == "operating" else self.setting
         return name, replace(SETTINGS[name], **self.overrides)
 
-    def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
-        t0 = time.perf_counter()
+    def prepare(self, robot: LegMap, recordings: list[Recording]) -> "Prepared":
+        """The preprocessed stance segments and the weights a fit runs on (the first half
+        of `calibrate`; the model-gap diagnosis fits several models to the same)."""
         kin = LegKinematics(robot)
         setting_name, w = self.weights_for(robot, recordings)
         warnings: list[str] = []
@@ -185,17 +203,7 @@ class InterFootCalibrator(Calibrator):
             raise CalibrationError("no stance recordings (kind 'stance'): record at least one static "
                                    "double-support stance, better four (I-IV)")
         # Preprocessing on the raw encoders.
-        R_BI = kin.R_BI
-        segments: list[_Prepared] = []
-        reports: list[FilterReport] = []
-        for r in stances:
-            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess,
-                                      r.motion)
-            reports.append(rep)
-            for s in segs:
-                up = up_in_base(s.imu_acc, R_BI)
-                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames,
-                                          None if r.ft is None else r.ft[s.frames]))
+        segments, reports = self.segments_of(kin, stances)
         warnings += filter_warnings(reports)
         if not segments:
             raise CalibrationError("no usable frames in any stance after filtering: "
@@ -211,6 +219,28 @@ class InterFootCalibrator(Calibrator):
             else:
                 warnings.append("no straight-leg standing recording: knee prior disabled (lambda_knee -> 0)")
                 w = replace(w, lambda_knee=0.0)
+        return Prepared(robot, kin, stances, segments, w, setting_name, prior, knees, reports, warnings)
+
+    def segments_of(self, kin: LegKinematics, recordings: list[Recording]) -> tuple[list["_Prepared"], list]:
+        """Each recording's contact segments after the frame selection (`select_frames`)
+        with its IMU vertical; (segments, filter reports)."""
+        segments, reports = [], []
+        for r in recordings:
+            segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, self.preprocess,
+                                      r.motion)
+            reports.append(rep)
+            for s in segs:
+                up = up_in_base(s.imu_acc, kin.R_BI)
+                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames,
+                                          None if r.ft is None else r.ft[s.frames], r.name))
+        return segments, reports
+
+    def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
+        t0 = time.perf_counter()
+        prep = self.prepare(robot, recordings)
+        kin, w, stances, segments = prep.kin, prep.w, prep.stances, prep.segments
+        setting_name, reports, warnings = prep.setting_name, prep.reports, list(prep.warnings)
+        prior, knees = prep.prior, prep.knees
         problem = _InterFootProblem(kin, segments, w, prior, knees, self.bound)
         t_pre = time.perf_counter() - t0
 
@@ -396,8 +426,50 @@ class _InterFootProblem:
             score = (feet**2).sum(1) + (flat**2).sum(1)
             keep = np.sort(np.argsort(score)[: n - int(round(fraction * n))])
             kept.append(_Prepared(seg.name, seg.q_enc[keep], seg.up_B[keep], seg.R_WB[keep], seg.frames[keep],
-                                  None if seg.ft is None else seg.ft[keep]))
+                                  None if seg.ft is None else seg.ft[keep], seg.recording))
         self.build(kept)
+
+
+def _whitened_problem(kin: LegKinematics, stances: list[Recording]) -> InterFootWeights:
+    """Row weights 1/sigma from the recordings' declared noise (the confound report's
+    and the posterior's scaling); raises when the recordings declare none."""
+    sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
+    if sig is None:
+        raise CalibrationError("effects: the recordings declare no sensor noise; the confound report and the "
+                               "posterior need it (sensor_model.encoder_noise_std, accel_noise_std)")
+    return InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
+        sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
+
+
+def _effect_model(kin: LegKinematics, names, segments: list[_Prepared]) -> EffectModel:
+    model = EffectModel(kin, load_effects(names))
+    if any(e.needs_ft for e in model.effects) and any(s.ft is None for s in segments):
+        raise CalibrationError(f"effects {[e.name for e in model.effects if e.needs_ft]}: the stance recordings "
+                               "have no ankle force/torque wrenches (ft)")
+    return model
+
+
+def _whitened_jacobian(kin, segs, white, bound, model, x, q_ref) -> np.ndarray:
+    p = _InterFootProblem(kin, segs, white, None, [], bound, model, q_ref)
+    p.means_at(x)
+    _, J = p.evaluate(x, "projected")
+    return J[:p.n_data_rows]
+
+
+def _solve_with_model(cal: InterFootCalibrator, kin: LegKinematics, segments: list[_Prepared], w, prior, knees,
+                      model: EffectModel, dq0: np.ndarray, held: tuple[int, ...]):
+    """Solve-trim-solve with the effects of `model` from the offsets `dq0`, loads
+    re-evaluated at the new offsets once; returns (x, problem, q_ref)."""
+    x = np.r_[dq0, np.zeros(model.n - 12)]
+    q_ref = dq0
+    for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
+        problem = _InterFootProblem(kin, segments, w, prior, knees, cal.bound, model, q_ref, held)
+        x, _ = problem.solve(x, cal)
+        if cal.trim_fraction > 0:
+            problem.trim(x, cal.trim_fraction)
+            x, _ = problem.solve(x, cal)
+        q_ref = x[:12]
+    return x, problem, q_ref
 
 
 def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, stances: list[Recording],
@@ -407,35 +479,14 @@ def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, sta
     cannot separate are held at zero), the same solve-trim-solve as the offsets-only
     fit, loads re-evaluated at the new offsets once, then the posterior of every
     parameter from the noise-whitened data rows. Returns (report, offsets, warnings)."""
-    model = EffectModel(kin, load_effects(cal.effect_names))
-    if any(e.needs_ft for e in model.effects) and any(s.ft is None for s in segments):
-        raise CalibrationError(f"effects {[e.name for e in model.effects if e.needs_ft]}: the stance recordings "
-                               "have no ankle force/torque wrenches (ft)")
-    sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
-    if sig is None:
-        raise CalibrationError("effects: the recordings declare no sensor noise; the confound report and the "
-                               "posterior need it (sensor_model.encoder_noise_std, accel_noise_std)")
-    white = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
-        sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
-
-    def whitened_jacobian(segs, x, q_ref):
-        p = _InterFootProblem(kin, segs, white, None, [], cal.bound, model, q_ref)
-        p.means_at(x)
-        _, J = p.evaluate(x, "projected")
-        return J[:p.n_data_rows]
-
-    x = np.r_[dq0, np.zeros(model.n - 12)]
-    before = confound_report(whitened_jacobian(segments, x, dq0), model, robot.joint_names)
+    model = _effect_model(kin, cal.effect_names, segments)
+    white = _whitened_problem(kin, stances)
+    x0 = np.r_[dq0, np.zeros(model.n - 12)]
+    before = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x0, dq0), model,
+                             robot.joint_names)
     held = tuple(model.names.index(h) for h in before["held"])
-    q_ref = dq0
-    for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
-        problem = _InterFootProblem(kin, segments, w, prior, knees, cal.bound, model, q_ref, held)
-        x, _ = problem.solve(x, cal)
-        if cal.trim_fraction > 0:
-            problem.trim(x, cal.trim_fraction)
-            x, _ = problem.solve(x, cal)
-        q_ref = x[:12]
-    J = whitened_jacobian(problem.segments, x, q_ref)
+    x, problem, q_ref = _solve_with_model(cal, kin, segments, w, prior, knees, model, dq0, held)
+    J = _whitened_jacobian(kin, problem.segments, white, cal.bound, model, x, q_ref)
     confounds = confound_report(J, model, robot.joint_names)
     free = [i for i in range(model.n) if i not in held]
     H = J[:, free].T @ J[:, free]
@@ -460,3 +511,108 @@ def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, sta
     }
     warnings = [f"effects: {line}" for line in confound_lines(confounds)]
     return report, x[:12], warnings
+
+
+@dataclass
+class ModelFit:
+    """A fit of the offsets and a set of effects (`fit_model`): the packed solution `x`
+    over `model`'s columns (offsets only: `model` has no effects), the offsets loads are
+    evaluated at, the parameters held at zero (confounded) and the confound report."""
+
+    effects: tuple[str, ...]
+    model: EffectModel
+    x: np.ndarray
+    q_ref: np.ndarray
+    held: tuple[str, ...]
+    confounds: dict | None
+
+
+def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: list[_Prepared] | None = None,
+              dq0: np.ndarray | None = None) -> ModelFit:
+    """Fit the offsets with `effects` (names; none: the offsets-only fit) to `segments`
+    (default: all of `prep`'s), as `calibrate` does: solve, trim, solve; with effects,
+    from the offsets-only estimate `dq0` (fitted here if not given), confounded
+    parameters held at zero."""
+    segments = prep.segments if segments is None else segments
+    kin = prep.kin
+    if dq0 is None:
+        problem = _InterFootProblem(kin, segments, prep.w, prep.prior, prep.knees, cal.bound)
+        dq0, _ = problem.solve(np.zeros(12), cal)
+        if cal.trim_fraction > 0:
+            problem.trim(dq0, cal.trim_fraction)
+            dq0, _ = problem.solve(dq0, cal)
+    model = _effect_model(kin, effects, segments)
+    if not effects:
+        return ModelFit((), model, np.asarray(dq0, dtype=float), np.asarray(dq0, dtype=float), (), None)
+    white = _whitened_problem(kin, prep.stances)
+    x0 = np.r_[dq0, np.zeros(model.n - 12)]
+    confounds = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x0, dq0), model,
+                                prep.robot.joint_names)
+    held = tuple(model.names.index(h) for h in confounds["held"])
+    x, _, q_ref = _solve_with_model(cal, kin, segments, prep.w, prep.prior, prep.knees, model, dq0, held)
+    return ModelFit(tuple(effects), model, x, q_ref, tuple(confounds["held"]), confounds)
+
+
+@dataclass
+class FrameResiduals:
+    """Per frame of a set of segments, at a fit: the raw residual rows r (N, 11) (6
+    inter-foot, 5 flat-ground; metres and radians), their Jacobians over `model`'s
+    columns with the segment means re-estimated, J (N, 11, n), and held, J_fixed; the
+    Jacobian G (N, 11, 12) w.r.t. the joint angles and H (N, 11, 2) w.r.t. the IMU's
+    roll and pitch (means held: the noise propagation), and each frame's segment,
+    recording, encoder angles and sample index in its recording."""
+
+    model: EffectModel
+    r: np.ndarray
+    J: np.ndarray
+    J_fixed: np.ndarray
+    G: np.ndarray
+    H: np.ndarray
+    segment: np.ndarray
+    recording: np.ndarray
+    q_enc: np.ndarray
+    time_index: np.ndarray
+
+
+NOISE_TILT = "imu_tilt"  # the effect whose columns carry the IMU's noise
+
+
+def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, segments: list[_Prepared],
+                    extra=()) -> FrameResiduals:
+    """The residuals of `segments` at `fit` and their Jacobians, with the columns of the
+    `extra` effects (instances, at zero) appended for score tests."""
+    kin = prep.kin
+    names = list(fit.effects)
+    effects = list(fit.model.effects) + list(extra)
+    if NOISE_TILT not in names:
+        effects += load_effects([NOISE_TILT])
+    model = EffectModel(kin, effects)
+    x = np.r_[fit.x, np.zeros(model.n - fit.model.n)]
+    unit = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6)
+    problem = _InterFootProblem(kin, segments, unit, None, [], cal.bound, model, fit.q_ref)
+    problem.means_at(x)
+    _, J_fix = problem.evaluate(x, "fixed")
+    r, J = problem.evaluate(x, "projected")
+    tilt = model.slices[NOISE_TILT]
+    rows, Js, Jfs, seg_idx, rec, q, tix = [], [], [], [], [], [], []
+    pos = 0
+    for i, seg in enumerate(segments):
+        n = len(seg.frames)
+
+        def per_frame(a):
+            feet = a[pos:pos + 6 * n].reshape(n, 6, *a.shape[1:])
+            flat = a[pos + 6 * n:pos + 11 * n].reshape(n, 5, *a.shape[1:])
+            return np.concatenate([feet, flat], axis=1)
+
+        rows.append(per_frame(r))
+        Jfs.append(per_frame(J_fix))
+        Js.append(per_frame(J))
+        seg_idx.append(np.full(n, i))
+        rec.append(np.array([seg.recording] * n, dtype=object))
+        q.append(seg.q_enc)
+        tix.append(seg.frames)
+        pos += 11 * n
+    J_fixed = np.concatenate(Jfs)
+    return FrameResiduals(model, np.concatenate(rows), np.concatenate(Js), J_fixed, J_fixed[:, :, :12],
+                          J_fixed[:, :, tilt][:, :, :2], np.concatenate(seg_idx), np.concatenate(rec),
+                          np.concatenate(q), np.concatenate(tix))

@@ -43,6 +43,10 @@ SUITES: dict[str, Suite] = {
         Suite("closed-loop-full", ("a3", "a2", G1_EXAMPLE), ("walking",), 35, {},
               ("closed_loop", "leaderboard", "external_robot"),
               "closed-loop, plus the G1 walked by its published policy through its leg map and spec"),
+        # The model-gap loop scored: run by `legcal_bench.benchmark.modelgap` (seeds per library effect).
+        Suite("modelgap", ("a3", "a2", G1_EXAMPLE), ("weld",), 10, {}, ("modelgap", "leaderboard", "external_robot"),
+              "the model-gap loop: each library effect (seeded realistic magnitudes), clean data (false alarms) and "
+              "three physical edits outside the library (A3-like), diagnosed (~40 min on 2 cores)"),
     )
 }
 

@@ -19,6 +19,8 @@ def cmd_bench(a: argparse.Namespace) -> int:
     suite = get_suite(a.suite)
     if "closed_loop" in suite.tags:
         return _bench_closed_loop(a, suite)
+    if "modelgap" in suite.tags:
+        return _bench_modelgap(a, suite)
     cells = planning.plan(a.suite, robots=a.robots, modes=a.modes, seeds=a.seeds, calibrators=a.calibrators,
                           collect_overrides=_collect_overrides(a))
     out = Path(a.out)
@@ -163,6 +165,34 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 
     generate(a.out)
     print(f"wrote {Path(a.out) / 'README.md'}")
+    return 0
+
+
+def _bench_modelgap(a: argparse.Namespace, suite) -> int:
+    """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
+    from legcal_bench.benchmark.modelgap import markdown, run
+    from legcal_bench.benchmark.plan import available
+    from legcal_bench.files.reports import write_report
+    from legcal_bench.provenance import code_version, describe
+
+    robots = []
+    for r in a.robots or suite.robots:
+        missing = available(r)
+        if missing is not None:
+            print(f"modelgap suite: skipping robot {r}: {missing}")
+        else:
+            robots.append(r)
+    seeds = a.seeds or suite.seeds
+    made_by = f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
+    code = code_version()
+    t0 = time.perf_counter()
+    data = run(robots, seeds=seeds, clean_seeds=2 * seeds, outside_robots=[r for r in robots if r == "a3"][:1],
+               outside_seeds=seeds, workers=a.workers, progress=not a.quiet)
+    data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
+    md = markdown(data, made_by, describe(code))
+    write_report(Path(a.out) / "modelgap", md, data, name="modelgap")
+    print(md)
+    print(f"{len(data['rows'])} cases, {data['wall_s']:.0f} s wall; {Path(a.out) / 'modelgap' / 'modelgap.md'}")
     return 0
 
 

@@ -45,6 +45,7 @@ def _role_joints(kin: LegKinematics, roles) -> list[tuple[str, int]]:
 class LegLength(Effect):
     name = "leg_length"
     summary = "thigh and shank length per leg"
+    remedy = "stances with a wider range of knee angles (or a measured leg length: a tape or a motion-capture pose)"
 
     def _links(self, kin: LegKinematics):
         out = []
@@ -72,6 +73,8 @@ class LegLength(Effect):
 class EncoderScale(Effect):
     name = "encoder_scale"
     summary = "encoder scale of hip pitch, knee and ankle pitch per leg"
+    remedy = ("stances spanning a wider range of each pitch joint's angle at similar loads (or the load-varied "
+              "protocol, to part it from compliance)")
 
     def parameters(self, kin):
         return [(label, "1") for label, _ in _role_joints(kin, PITCH_ROLES)]
@@ -87,6 +90,8 @@ class EncoderScale(Effect):
 class Compliance(Effect):
     name = "compliance"
     summary = "series compliance of hip roll, knee and ankle pitch per leg (load from the ankle F/T)"
+    remedy = ("a load-varied protocol: stances pushing the feet apart and together and pitching against the floor, "
+              "measured by the ankle F/T sensors (not in the protocol yet)")
     needs_ft = True
 
     def parameters(self, kin):
@@ -109,6 +114,7 @@ class Compliance(Effect):
 class ImuTilt(Effect):
     name = "imu_tilt"
     summary = "IMU mounting tilt about its x (roll) and y (pitch) axes"
+    remedy = "an inclinometer on the pelvis (or standing on a surface whose level is known)"
 
     def parameters(self, kin):
         return [("roll", "rad"), ("pitch", "rad")]
@@ -120,6 +126,7 @@ class ImuTilt(Effect):
 class HipAxis(Effect):
     name = "hip_axis"
     summary = "hip-pitch axis of each leg rotated about the hip's x and z axes"
+    remedy = "stances combining hip pitch with hip roll and yaw excursions"
 
     def _joints(self, kin):
         out = []

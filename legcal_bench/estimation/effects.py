@@ -54,6 +54,8 @@ class Effect(ABC):
     name: str = ""
     summary: str = ""
     needs_ft: bool = False
+    # The data that would separate it from what it is confounded with (reports say it).
+    remedy: str = "stances whose postures or loads change its signature relative to the offsets'"
 
     @abstractmethod
     def parameters(self, kin: LegKinematics) -> list[tuple[str, str]]:

@@ -17,6 +17,15 @@ collection seed. Units at this edge: degrees, millimetres, N m/rad, fractions.
   hip_axis:joint=left_hip_pitch,about=z,deg=0.5
                                        the MJCF copy with that joint's axis rotated about
                                        its body's x, y or z axis
+  joint_axis:joint=left_knee,about=x,deg=0.5
+                                       the same for any leg joint (`hip_axis` is the hips')
+  link_offset:link=left_shank,axis=y,mm=3
+                                       the MJCF copy with the link's far joint moved across
+                                       (a bent link): along x, y or z of the robot's frame
+                                       at the zero posture
+  link_twist:link=left_thigh,deg=1     the MJCF copy with the link twisted about its own
+                                       long axis (the line between its two joints): the
+                                       far joint's body and everything below it turned
   compliance:joint=left_knee,k=1e4     the MJCF copy with a spring (stiffness k, N m/rad)
                                        in series between the motor, whose angle the
                                        encoder reads, and the link: a passive hinge
@@ -64,6 +73,12 @@ KINDS = {k.name: k for k in (
     EffectKind("link_length", {"link": ("link", None), "mm": ("number", None)}, "link lengthened (mm)"),
     EffectKind("hip_axis", {"joint": ("joint", None), "about": ("about", "z"), "deg": ("number", None)},
                "joint axis rotated about its body's axis (deg)"),
+    EffectKind("joint_axis", {"joint": ("joint", None), "about": ("about", "z"), "deg": ("number", None)},
+               "any leg joint's axis rotated about its body's axis (deg)"),
+    EffectKind("link_offset", {"link": ("link", None), "axis": ("about", "y"), "mm": ("number", None)},
+               "link bent: its far joint moved across (mm, robot frame at the zero posture)"),
+    EffectKind("link_twist", {"link": ("link", None), "deg": ("number", None)},
+               "link twisted about its long axis (deg)"),
     EffectKind("compliance", {"joint": ("joint", None), "k": ("number", None)},
                "series spring between motor and link (N m/rad)"),
     EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0)},
@@ -186,7 +201,7 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
             floor["slope"] = T @ floor.get("slope", np.eye(4))
             truth.append({"effect": e.spec, "kind": e.kind, "roll_rad": float(np.deg2rad(v["roll"])),
                           "pitch_rad": float(np.deg2rad(v["pitch"]))})
-        elif e.kind == "link_length":
+        elif e.kind in ("link_length", "link_offset", "link_twist"):
             link = v["link"]
             if link is None:
                 link = f"{rng.choice(SIDES)}_{rng.choice(LINKS)}"
@@ -194,12 +209,22 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
             if side not in SIDES or part not in LINKS:
                 raise ConfigError(f"--effect {e.spec!r}: link {link!r} is not one of "
                                   f"{[f'{s}_{p}' for s in SIDES for p in LINKS]}")
-            edits.append(("link_length", (side, part, v["mm"] * 1e-3)))
-            truth.append({"effect": e.spec, "kind": e.kind, "link": link, "length_m": v["mm"] * 1e-3})
-        elif e.kind == "hip_axis":
-            j = _resolve_joint(legmap, v["joint"], rng, e.spec, roles=("hip_pitch", "hip_roll", "hip_yaw"))
+            if e.kind == "link_length":
+                edits.append(("link_length", (side, part, v["mm"] * 1e-3)))
+                truth.append({"effect": e.spec, "kind": e.kind, "link": link, "length_m": v["mm"] * 1e-3})
+            elif e.kind == "link_offset":
+                axis = _choice(v["axis"], ABOUT, rng, e.spec, "axis")
+                edits.append(("link_offset", (side, part, np.eye(3)[ABOUT.index(axis)] * v["mm"] * 1e-3)))
+                truth.append({"effect": e.spec, "kind": e.kind, "link": link, "axis": axis,
+                              "offset_m": v["mm"] * 1e-3})
+            else:
+                edits.append(("link_twist", (side, part, np.deg2rad(v["deg"]))))
+                truth.append({"effect": e.spec, "kind": e.kind, "link": link, "angle_rad": float(np.deg2rad(v["deg"]))})
+        elif e.kind in ("hip_axis", "joint_axis"):
+            roles = ("hip_pitch", "hip_roll", "hip_yaw") if e.kind == "hip_axis" else None
+            j = _resolve_joint(legmap, v["joint"], rng, e.spec, roles=roles)
             about = _choice(v["about"], ABOUT, rng, e.spec, "about")
-            edits.append(("hip_axis", (j, about, np.deg2rad(v["deg"]))))
+            edits.append(("joint_axis", (j, about, np.deg2rad(v["deg"]))))
             truth.append({"effect": e.spec, "kind": e.kind, "joint": joint_label(legmap, j), "about": about,
                           "angle_rad": float(np.deg2rad(v["deg"]))})
         elif e.kind == "compliance":
@@ -233,7 +258,7 @@ def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
         return data.oMf[model.getFrameId(name, pin.FrameType.BODY)].rotation
 
     for kind, args in edits:
-        if kind == "link_length":
+        if kind in ("link_length", "link_offset", "link_twist"):
             side, part, delta = args
             chain = [int(c) for c in kin.poe[side].cols]
             roles = [legmap.joint_roles[c] for c in chain]
@@ -245,9 +270,19 @@ def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
             R_prev = data.oMi[prev_body.parentJoint].rotation
             child = joint.parent
             R_parent = body_rotation(child.parent.name) if child.parent.name else np.eye(3)
-            shift = R_parent.T @ R_prev @ u * delta
-            child.pos = (np.asarray(child.pos if child.pos is not None else np.zeros(3), float) + shift).tolist()
-        elif kind == "hip_axis":
+            pos = np.asarray(child.pos if child.pos is not None else np.zeros(3), float)
+            if kind == "link_length":
+                child.pos = (pos + R_parent.T @ R_prev @ u * delta).tolist()
+            elif kind == "link_offset":  # delta: a vector in the robot's frame at the zero posture
+                child.pos = (pos + R_parent.T @ delta).tolist()
+            else:  # twist the child body (and its subtree) about the link's axis through its origin
+                R_child = body_rotation(child.name)
+                R_rel = R_parent.T @ R_child
+                turn = Rotation.from_rotvec(R_parent.T @ R_prev @ u * delta).as_matrix()
+                for attr in ("euler", "axisangle", "xyaxes", "zaxis"):
+                    setattr(child, attr, None)
+                child.quat = Rotation.from_matrix(turn @ R_rel).as_quat(scalar_first=True).tolist()
+        elif kind == "joint_axis":
             j, about, angle = args
             joint = m.find("joint", legmap.joint_names[j])
             axis = np.asarray(joint.axis if joint.axis is not None else (0, 0, 1), float)

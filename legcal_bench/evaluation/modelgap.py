@@ -1,0 +1,442 @@
+"""The model-gap loop (issue #17): does the offsets-only model explain the recordings;
+if not, where does the residual live, and which effect of the library is missing, or
+none ("unexplained").
+
+Detection. The declared noise model, carried to each frame's residual
+(`legcal_bench.estimation.whitening`), whitens it; for a model that explains the data
+the whitened chi-square is chi2(dof), dof = sum of the frames' ranks - 6 per segment
+(the inter-foot means) - the free parameters. Each fit's chi-square is taken after one
+Gauss-Newton step of the whitened problem from that fit (the calibrator weighs rows by
+a diagonal approximation of the same noise; the step makes models comparable). Tests:
+the training chi-square, and the held-out sessions' at the training estimate (the gap
+between them), each at ALPHA / 2.
+
+Selection, greedy and nested (at most MAX_EFFECTS): each library effect is fitted on
+top of the current model (`fit_model`, confounded parameters held); it is kept only if
+  1. its chi-square drop beats the BIC penalty, delta_chi2 > k ln(n_rows);
+  2. leave-one-stance-out cross-validation agrees: the held-out stances' chi-square,
+     predicted from the other stances, is lower with the effect than without;
+  3. it moves some offset by more than MOVE_SIGMAS of that offset's noise-only
+     standard deviation (otherwise it does not matter for the calibration).
+Two candidates passing within AMBIGUOUS_BIC of each other are reported as ambiguous
+(with the data that would separate them), never picked by a hair. A detected residual
+that no candidate explains is "unexplained", with tracing's localization instead.
+
+Tracing (`trace`): the whitened residual by channel, stance and leg (a generic
+geometric error of each leg, `LegGeometry`, and the IMU's tilt, scored without a fit)
+and against signatures (joint angle, load, motion direction per joint; time per
+segment) by score tests (`legcal_bench.estimation.lineartests`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2 as chi2_dist
+
+from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.effects import joint_loads, load_effects, registry
+from legcal_bench.estimation.lineartests import _basis, chi2_after, score
+from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
+from legcal_bench.estimation.whitening import ROW_CHANNELS, expected_rows, frame_covariances, whitening
+from legcal_bench.robots.legmap import SIDES
+
+ALPHA = 0.01  # false-alarm rate of the detection tests together (each at ALPHA / 2)
+MOVE_SIGMAS = 3.0  # an effect must move an offset by this many noise-only standard deviations
+AMBIGUOUS_BIC = 10.0  # a BIC difference below this is not decisive (Kass & Raftery's "very strong")
+MAX_EFFECTS = 3
+# A selection that leaves a significant residual holding more than this share of the
+# offsets-only fit's excess chi-square (chi2 - dof) is a poor fit: the effect is not the
+# cause, or not the only one outside the library; the verdict is then "unexplained".
+POOR_FIT_SHARE = 0.05
+CHANNELS = tuple(dict.fromkeys(ROW_CHANNELS))
+LOCATIONS = ("left leg", "right leg", "IMU")
+
+
+@dataclass
+class Evaluated:
+    """One model at its fit, over a set of segments: the whitened residual z (rows) and
+    Jacobian Jw (rows, free columns, segment means eliminated), chi-square after the
+    Gauss-Newton step, degrees of freedom."""
+
+    fit: object
+    z: np.ndarray
+    Jw: np.ndarray
+    chi2: float
+    dof: int
+    n_rows: int
+    step: np.ndarray
+    frames: object = None
+    W: np.ndarray | None = None
+    cov: np.ndarray | None = None
+
+    @property
+    def k(self) -> int:
+        return self.Jw.shape[1]
+
+    @property
+    def p_value(self) -> float:
+        return float(chi2_dist.sf(self.chi2, self.dof))
+
+
+@dataclass
+class Context:
+    cal: object
+    prep: object
+    sigma_q: float
+    sigma_t: float
+    heldout: list = field(default_factory=list)  # held-out segments
+    recordings: dict = field(default_factory=dict)  # name -> Recording (velocities for tracing)
+
+
+def _free_columns(fit) -> list[int]:
+    held = {fit.model.names.index(h) for h in fit.held}
+    return [i for i in range(fit.model.n) if i not in held]
+
+
+def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -> Evaluated:
+    """Whitened residual of `segments` at `fit` and the chi-square after one whitened
+    Gauss-Newton step over the fit's free columns."""
+    from legcal_bench.calibrators.interfoot import frame_residuals
+
+    fr = frame_residuals(ctx.cal, ctx.prep, fit, segments, extra)
+    cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
+    W, rank = whitening(cov)
+    z = np.einsum("nij,nj->ni", W, fr.r).ravel()
+    free = _free_columns(fit)
+    Jw = np.einsum("nij,njk->nik", W, fr.J[:, :, free]).reshape(-1, len(free))
+    step = np.linalg.lstsq(Jw, z, rcond=None)[0]
+    n_seg = len(np.unique(fr.segment))
+    return Evaluated(fit, z, Jw, chi2_after(z, Jw), int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
+                     fr if keep_frames else None, W if keep_frames else None, cov if keep_frames else None)
+
+
+def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, int]:
+    """Chi-square of `segments` (not in the fit) at the training estimate after its
+    Gauss-Newton step, their own inter-foot means re-estimated; (chi2, dof)."""
+    ev = evaluate(ctx, fit, segments)
+    z = ev.z - ev.Jw @ train.step
+    n_seg = len({s.name for s in segments})
+    # The segment means are re-estimated on these frames: 6 dof each.
+    return float(z @ z), int(ev.n_rows - 6 * n_seg)
+
+
+def context(cal, robot, recordings) -> Context:
+    prep = cal.prepare(robot, recordings)
+    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
+    if sig is None:
+        raise CalibrationError("diagnose: the recordings declare no sensor noise (sensor_model.encoder_noise_std, "
+                               "accel_noise_std); a residual cannot be judged against noise nobody declared")
+    held = [r for r in recordings if r.kind == "heldout"]
+    heldout, _ = cal.segments_of(prep.kin, held) if held else ([], [])
+    return Context(cal, prep, sig["encoder"], sig["tilt"], heldout, {r.name: r for r in recordings})
+
+
+def _offsets_sigma(ev: Evaluated) -> np.ndarray:
+    """Noise-only standard deviations of the 12 offsets (the offsets-only model)."""
+    H = ev.Jw.T @ ev.Jw
+    return np.sqrt(np.diag(np.linalg.pinv(H))[:12])
+
+
+def _cv(ctx: Context, effects: tuple, base_folds: dict | None) -> tuple[float, dict]:
+    """Leave-one-stance-out chi-square of the model with `effects`; the folds' offsets-
+    only fits are reused from `base_folds` (recording -> offsets) when given."""
+    from legcal_bench.calibrators.interfoot import fit_model
+
+    segs = ctx.prep.segments
+    names = list(dict.fromkeys(s.recording for s in segs))
+    total, dq = 0.0, {}
+    for name in names:
+        train = [s for s in segs if s.recording != name]
+        test = [s for s in segs if s.recording == name]
+        dq0 = None if base_folds is None else base_folds[name]
+        fit = fit_model(ctx.cal, ctx.prep, effects, segments=train, dq0=dq0)
+        dq[name] = fit.x[:12]
+        tr = evaluate(ctx, fit, train)
+        c, _ = heldout_chi2(ctx, fit, tr, test)
+        total += c
+    return total, dq
+
+
+def candidates(ctx: Context, names=None) -> tuple[list[str], list[str]]:
+    """(library effects that can be fitted to these data, notes on those that cannot)."""
+    names = sorted(registry()) if names is None else list(names)
+    ok, notes = [], []
+    has_ft = all(s.ft is not None for s in ctx.prep.segments)
+    for n in names:
+        e = load_effects([n])[0]
+        if e.needs_ft and not has_ft:
+            notes.append(f"{n}: not tried, the recordings have no ankle force/torque wrenches")
+        else:
+            ok.append(n)
+    return ok, notes
+
+
+def _confound_entries(fit) -> list[dict]:
+    out = []
+    if not fit.confounds:
+        return out
+    for name, e in fit.confounds["effects"].items():
+        if e["confounded_with_offsets"]:
+            eff = load_effects([name])[0]
+            out.append({"effect": name, "direction": e["closest_direction"], "offsets": e["mimics_offsets"],
+                        "cosine": e["max_cosine_to_offsets"], "remedy": eff.remedy,
+                        "text": f"{e['closest_direction']} or offsets {e['mimics_offsets']}: these data cannot tell "
+                                f"them apart; {eff.remedy} would"})
+    return out
+
+
+def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
+    """The whole loop on one set of recordings; a JSON-ready report (radians, SI)."""
+    from legcal_bench.calibrators.interfoot import fit_model
+
+    say = progress or (lambda msg: None)
+    ctx = context(cal, robot, recordings)
+    names = list(robot.joint_names)
+    say("offsets-only fit")
+    base_fit = fit_model(cal, ctx.prep)
+    base = evaluate(ctx, base_fit, ctx.prep.segments, keep_frames=True)
+    sigma0 = _offsets_sigma(base)
+    ln_n = float(np.log(base.n_rows))
+    detection = {"chi2": base.chi2, "dof": base.dof, "chi2_per_dof": base.chi2 / base.dof,
+                 "z": (base.chi2 - base.dof) / np.sqrt(2 * base.dof), "p_value": base.p_value}
+    if ctx.heldout:
+        c, d = heldout_chi2(ctx, base_fit, base, ctx.heldout)
+        detection["heldout"] = {"chi2": c, "dof": d, "chi2_per_dof": c / d, "p_value": float(chi2_dist.sf(c, d)),
+                                "ratio_to_training": (c / d) / (base.chi2 / base.dof)}
+    tried, notes = candidates(ctx, effects)
+    steps, selected, ambiguous, confounded = [], [], [], {}
+    current, current_fit = base, base_fit
+    base_folds = None
+    cv_current = None
+    while len(selected) < MAX_EFFECTS:
+        rows = []
+        for name in tried:
+            if name in selected:
+                continue
+            say(f"fit + {name}")
+            fit = fit_model(cal, ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
+            for c in _confound_entries(fit):
+                confounded.setdefault(c["effect"], c)
+            ev = evaluate(ctx, fit, ctx.prep.segments)
+            k = ev.k - current.k
+            d = current.chi2 - ev.chi2
+            move = np.abs(fit.x[:12] - current_fit.x[:12]) / sigma0
+            rows.append({"effect": name, "fit": fit, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
+                         "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
+                         "max_offset_move_sigmas": float(move.max()),
+                         "moves_offsets": bool(move.max() > MOVE_SIGMAS)})
+        for r in rows:
+            r["passes_cv"] = None
+        passing = [r for r in rows if r["passes_bic"] and r["moves_offsets"]]
+        if passing:
+            if cv_current is None:
+                say("cross-validation (offsets only)")
+                cv_current, base_folds = _cv(ctx, tuple(selected), None)
+            for r in passing:
+                say(f"cross-validation + {r['effect']}")
+                cv, _ = _cv(ctx, tuple(selected) + (r["effect"],), base_folds if not selected else None)
+                r["cv_chi2"] = cv
+                r["passes_cv"] = bool(cv < cv_current)
+        steps.append({"on_top_of": list(selected), "cv_chi2_current": cv_current,
+                      "candidates": [{k: v for k, v in r.items() if k not in ("fit", "ev")} for r in rows]})
+        ok = sorted([r for r in passing if r["passes_cv"]], key=lambda r: r["bic"])
+        if not ok:
+            break
+        if len(ok) > 1 and ok[1]["bic"] - ok[0]["bic"] < AMBIGUOUS_BIC:
+            close = [r for r in ok if r["bic"] - ok[0]["bic"] < AMBIGUOUS_BIC]
+            ambiguous = [{"effect": r["effect"], "bic_minus_best": r["bic"] - ok[0]["bic"],
+                          "remedy": load_effects([r["effect"]])[0].remedy} for r in close]
+            break
+        best = ok[0]
+        selected.append(best["effect"])
+        current, current_fit = best["ev"], best["fit"]
+        cv_current = best["cv_chi2"]
+        base_folds = None
+        if current.p_value >= ALPHA / 2:
+            break
+    final = evaluate(ctx, current_fit, ctx.prep.segments, keep_frames=True)
+    after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
+             "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
+    if ctx.heldout:
+        c, d = heldout_chi2(ctx, current_fit, final, ctx.heldout)
+        after["heldout"] = {"chi2": c, "dof": d, "chi2_per_dof": c / d, "p_value": float(chi2_dist.sf(c, d))}
+    significant = detection["p_value"] < ALPHA / 2 or detection.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    residual_left = after["p_value"] < ALPHA / 2 or after.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    excess = max(base.chi2 - base.dof, 1e-12)
+    after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess
+    poor_fit = bool(selected) and residual_left and after["share_of_excess_left"] > POOR_FIT_SHARE
+    tracing = trace(ctx, base)
+    partial = []
+    if poor_fit:
+        partial, selected = list(selected), []
+    if ambiguous:
+        verdict = "ambiguous"
+    elif selected:
+        verdict = "selected"
+    elif significant or partial:
+        verdict = "unexplained"
+    else:
+        verdict = "explained"
+    params = {}
+    if selected or partial:
+        model = current_fit.model
+        free = _free_columns(current_fit)
+        cov = np.linalg.pinv(final.Jw.T @ final.Jw)
+        std = np.full(model.n, np.nan)
+        std[free] = np.sqrt(np.diag(cov))
+        for i in range(12, model.n):
+            params[model.names[i]] = {"value": float(current_fit.x[i]), "std": float(std[i]),
+                                      "unit": model.units[i], "held": model.names[i] in current_fit.held}
+    report = {
+        "verdict": verdict,
+        "selected": selected,
+        "poor_fit": partial,
+        "ambiguous": ambiguous,
+        "confounded": list(confounded.values()),
+        "detection": detection,
+        "after": after,
+        "alpha": ALPHA,
+        "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,
+                  "ambiguous_bic": AMBIGUOUS_BIC, "max_effects": MAX_EFFECTS, "poor_fit_share": POOR_FIT_SHARE},
+        "steps": steps,
+        "parameters": params,
+        "offsets_only_rad": dict(zip(names, map(float, base_fit.x[:12]))),
+        "offsets_rad": dict(zip(names, map(float, current_fit.x[:12]))),
+        "offsets_noise_std_rad": dict(zip(names, map(float, sigma0))),
+        "tracing": tracing,
+        "tracing_after": trace(ctx, final) if selected else None,
+        "notes": notes,
+        "summary": "",
+    }
+    report["summary"] = summary_line(report)
+    report["_frames"] = {"before": base, "after": final}  # for plots; dropped from JSON
+    return report
+
+
+def summary_line(rep: dict) -> str:
+    d = rep["detection"]
+    where = rep["tracing"]["localization"]
+    head = (f"offsets-only chi2/dof {d['chi2_per_dof']:.3f} (p = {d['p_value']:.2g}"
+            + (f"; held-out {d['heldout']['chi2_per_dof']:.3f}" if "heldout" in d else "") + ")")
+    v = rep["verdict"]
+    if v == "explained":
+        return f"explained by the offsets within the declared noise: {head}"
+    if v == "unexplained":
+        poor = (f"; {' + '.join(rep['poor_fit'])} fit poorly (leaves {rep['after']['share_of_excess_left']:.0%} "
+                "of the excess)") if rep["poor_fit"] else ""
+        return (f"unexplained residual ({head}); no library effect explains it{poor}; it lives in the "
+                f"{where['location']} ({where['channel']} rows)")
+    if v == "ambiguous":
+        return (f"ambiguous: {' or '.join(a['effect'] for a in rep['ambiguous'])} explain it about equally ({head});"
+                f" to tell them apart: {'; '.join(dict.fromkeys(a['remedy'] for a in rep['ambiguous']))}")
+    a = rep["after"]
+    return (f"{v}: {' + '.join(rep['selected'])} ({head} -> {a['chi2_per_dof']:.3f}, p = {a['p_value']:.2g})")
+
+
+def trace(ctx: Context, ev: Evaluated) -> dict:
+    """Where the whitened residual of `ev` (kept frames) lives: channels, stances,
+    location (each leg's generic geometry, the IMU), signatures."""
+    fr, W, cov = ev.frames, ev.W, ev.cov
+    n = len(fr.r)
+    z = ev.z.reshape(n, 11)
+    z = z - (ev.Jw @ ev.step).reshape(n, 11)  # after the Gauss-Newton step, as the chi-square
+    expect = expected_rows(cov)
+    out: dict = {"channels": {}, "stances": {}, "locations": {}, "signatures": {}}
+    for c in CHANNELS:
+        idx = [i for i, x in enumerate(ROW_CHANNELS) if x == c]
+        o, e = float((z[:, idx] ** 2).sum()), float(expect[:, idx].sum())
+        out["channels"][c] = {"chi2": o, "expected": e, "ratio": o / e}
+    seg_names = [s.name for s in ctx.prep.segments]
+    for s in np.unique(fr.segment):
+        m = fr.segment == s
+        o, e = float((z[m] ** 2).sum()), float(expect[m].sum())
+        out["stances"][seg_names[s] if s < len(seg_names) else str(s)] = {"chi2": o, "expected": e, "ratio": o / e}
+    # Every column with the segment means re-estimated, as in the fit; the fit's own
+    # columns are the nuisance.
+
+    def whiten(C):
+        return np.einsum("nij,njk->nik", W, project_means(C, fr.segment)).reshape(n * 11, -1)
+
+    Qn = _basis(ev.Jw)
+    zr = ev.z - Qn @ (Qn.T @ ev.z)
+    kin = ctx.prep.kin
+    # Locations: a generic geometric error of each leg, the IMU's tilt.
+    from legcal_bench.estimation.effects import EffectModel
+
+    groups = {}
+    for side in SIDES:
+        m = EffectModel(kin, [LegGeometry(side)])
+        J = _extra_columns(ctx, ev.fit, fr, m)
+        groups[f"{side} leg"] = whiten(J)
+    groups["IMU"] = whiten(fr.H)
+    for name, C in groups.items():
+        d, dof = score(zr, Qn, C)
+        out["locations"][name] = {"delta_chi2": d, "dof": dof, "excess": d - dof, "log10_p": _log10_sf(d, dof)}
+    # Signatures per joint.
+    values = {"angle": fr.q_enc, "load": _loads(ctx, fr), "motion": _motion(ctx, fr)}
+    names = list(ctx.prep.robot.joint_names)
+    for fam in FAMILIES:
+        v = values[fam]
+        if v is None:
+            continue
+        C = whiten(joint_columns(fr.G, v))
+        per = []
+        for j in range(12):
+            d, dof = score(zr, Qn, C[:, [j]])
+            per.append({"joint": names[j], "delta_chi2": d, "dof": dof, "excess": d - dof,
+                        "log10_p": _log10_sf(d, dof)})
+        out["signatures"][fam] = per
+    t = np.array([ctx.recordings[r].time[i] for r, i in zip(fr.recording, fr.time_index)]) \
+        if all(r in ctx.recordings for r in set(fr.recording)) else fr.time_index.astype(float)
+    d, dof = score(zr, Qn, whiten(time_columns(fr.segment, t)))
+    out["signatures"]["time"] = [{"joint": "(every row, per segment)", "delta_chi2": d, "dof": dof,
+                                  "excess": d - dof, "log10_p": _log10_sf(d, dof)}]
+    # The location explaining the most beyond what its parameters would take from noise.
+    loc = max(out["locations"], key=lambda k: out["locations"][k]["excess"])
+    chan = max(out["channels"], key=lambda k: out["channels"][k]["ratio"])
+    out["localization"] = {"location": loc, "channel": chan,
+                           "log10_p": out["locations"][loc]["log10_p"],
+                           "channel_ratio": out["channels"][chan]["ratio"]}
+    return out
+
+
+def _log10_sf(x: float, dof: int) -> float:
+    return float(chi2_dist.logsf(x, max(dof, 1)) / np.log(10)) if dof > 0 else 0.0
+
+
+def _extra_columns(ctx: Context, fit, fr, model) -> np.ndarray:
+    """(N, 11, P) the held-mean Jacobian of `model`'s effect columns at `fit`'s offsets
+    over the frames of `fr` (same segments, same order)."""
+    from legcal_bench.calibrators.interfoot import frame_residuals
+
+    segs = [s for i, s in enumerate(ctx.prep.segments) if i in set(fr.segment.tolist())]
+    ex = frame_residuals(ctx.cal, ctx.prep, fit, segs, extra=model.effects)
+    cols = [ex.model.slices[e.name] for e in model.effects]
+    return np.concatenate([ex.J_fixed[:, :, sl] for sl in cols], axis=2)
+
+
+def _loads(ctx: Context, fr) -> np.ndarray | None:
+    segs = ctx.prep.segments
+    if any(s.ft is None for s in segs):
+        return None
+    out = []
+    for i in np.unique(fr.segment):
+        s = segs[i]
+        out.append(joint_loads(ctx.prep.kin, s.q_enc, s.ft, s.up_B))
+    return np.concatenate(out)
+
+
+def _motion(ctx: Context, fr) -> np.ndarray | None:
+    """Sign of each joint's velocity at each frame, from its recording."""
+    out = np.zeros_like(fr.q_enc)
+    for name in set(fr.recording):
+        rec = ctx.recordings.get(name)
+        if rec is None or len(rec.time) < 3:
+            return None
+        v = np.gradient(rec.q_enc, rec.time, axis=0)
+        m = fr.recording == name
+        out[m] = np.sign(v[fr.time_index[m]])
+    return out
