@@ -36,7 +36,7 @@ from legcal_bench.estimation.levelling import levelling_rotations, tilted, up_in
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
 from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
-from legcal_bench.estimation.preprocess import FilterReport, filter_warnings, select_frames
+from legcal_bench.estimation.preprocess import filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                  uncertainty_warnings)
