@@ -151,6 +151,9 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
         if "closed_loop" in s.tags:
             raise ConfigError(f"suite {suite!r} walks, it has no static cells: run it with legcal-bench bench "
                               f"--suite {suite} (legcal_bench.benchmark.closed_loop)")
+        if "modelgap" in s.tags:
+            raise ConfigError(f"suite {suite!r} diagnoses session sets, it has no calibrator cells: run it with "
+                              f"legcal-bench bench --suite {suite} (legcal_bench.benchmark.modelgap)")
     elif robots is not None and modes is not None and seeds is not None:
         s = Suite(suite, (), (), 1)  # an ad-hoc plan, e.g. a sweep
     else:

@@ -276,7 +276,66 @@ def cmd_export(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_diagnose(a: argparse.Namespace) -> int:
+    """The model-gap loop on a set of recordings: verdict, effects, tracing (markdown, JSON, plot)."""
+    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.evaluation.modelgap import diagnose
+    from legcal_bench.files.reports import write_report
+    from legcal_bench.provenance import code_version, describe
+    from legcal_bench.reports.diagnose import json_ready, markdown, plot, truth_scores
+    from legcal_bench.robots import load_robot
+
+    if a.walk:
+        raise ConfigError("--walk: the closed-loop before/after of a diagnosis is not built yet; run walk-eval on "
+                          "the two offset sets in the report (offsets_only_rad, offsets_rad)")
+    options = {"setting": "sensor"}
+    if a.result:
+        try:
+            res = json.loads(Path(a.result).read_text())
+        except (OSError, ValueError) as e:
+            raise ConfigError(f"--result {a.result}: not a readable result JSON ({e}); give the file "
+                              "legcal-bench calibrate --out wrote") from None
+        if res.get("calibrator") != "interfoot":
+            raise ConfigError(f"--result {a.result}: calibrator {res.get('calibrator')!r}; the diagnosis refits "
+                              "with interfoot's residuals (calibrate with --calibrator interfoot)")
+        setting = res.get("settings", {}).get("setting")
+        if setting:
+            options["setting"] = setting
+    cal = get_calibrator("interfoot", **options)
+    writable_parent(a.out, "--out")
+    legmap = load_robot(a.robot, a.mjcf)
+    recordings = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
+    effects = a.effects or None
+    report = diagnose(cal, legmap, recordings, effects=effects,
+                      progress=None if a.quiet else (lambda m: print(f"  diagnose: {m}", flush=True)))
+    truth = truth_scores(report, Path(a.bags), legmap.joint_names)
+    made_by = f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}" + (f" --result {a.result}" if a.result else "")
+    code = code_version()
+    data = {**json_ready(report), "truth": truth, "made_by": made_by, "code": code}
+    md = markdown(report, made_by, describe(code), truth)
+    write_report(a.out, md, data, name="diagnosis")
+    plot(report, Path(a.out) / "trace.png")
+    print(report["summary"])
+    if truth:
+        print(f"offsets RMS error vs truth: {truth['before']:.4f} deg -> {truth['after']:.4f} deg")
+    print(f"wrote {a.out}/diagnosis.md, .json, trace.png")
+    return 0
+
+
 def add_commands(sub) -> None:
+    dg = sub.add_parser("diagnose", help="model gap: does the offsets-only model explain the recordings; where the "
+                                         "residual lives; which library effect is missing, or 'unexplained'")
+    robot_args(dg)
+    dg.add_argument("--bags", required=True, help="directory of recordings")
+    dg.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
+    dg.add_argument("--result", default=None, help="a calibrate result JSON (interfoot): its setting is reused")
+    dg.add_argument("--effects", nargs="+", default=None, help="candidate library effects (default: all registered)")
+    dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png")
+    dg.add_argument("--walk", action="store_true", help="closed-loop before/after (not built yet: errors)")
+    dg.add_argument("--quiet", action="store_true")
+    dg.set_defaults(func=cmd_diagnose)
+
     k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
     robot_args(k)
     k.add_argument("--bags", required=True, help="directory of recordings (legcal-bench collect --out, or your own)")

@@ -49,6 +49,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import ConfigError
+from legcal_bench.geometry.poses import wxyz
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.sensors import SimSensors
 
@@ -281,7 +282,7 @@ def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
                 turn = Rotation.from_rotvec(R_parent.T @ R_prev @ u * delta).as_matrix()
                 for attr in ("euler", "axisangle", "xyaxes", "zaxis"):
                     setattr(child, attr, None)
-                child.quat = Rotation.from_matrix(turn @ R_rel).as_quat(scalar_first=True).tolist()
+                child.quat = wxyz(Rotation.from_matrix(turn @ R_rel)).tolist()
         elif kind == "joint_axis":
             j, about, angle = args
             joint = m.find("joint", legmap.joint_names[j])

@@ -113,3 +113,33 @@ def test_a_slope_tilts_both_soles_alike(tmp_path):
         q = tr.sole_poses_world[:, side, 3:]
         normal = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()[:, :, 2]  # each sole's normal in the world
         assert np.abs(normal - [np.sin(np.radians(0.4)), 0, np.cos(np.radians(0.4))]).max() < 1e-9
+
+
+@pytest.mark.parametrize("robot", ["a3", "a2"])
+def test_a_shank_bent_3mm_sideways_moves_the_true_sole_3mm_along_y_and_does_not_turn_it(tmp_path, robot):
+    lm, r = _reality(tmp_path, robot, "link_offset:link=right_shank,axis=y,mm=3")
+    nominal, real = LegKinematics(lm), LegKinematics(r.sim_legmap)
+    q = np.zeros(12)
+    (L0, R0), (L1, R1) = nominal.sole_poses_batch(q[None]), real.sole_poses_batch(q[None])
+    assert R1[0, :3, 3] - R0[0, :3, 3] == pytest.approx([0.0, 0.003, 0.0], abs=1e-9)
+    assert np.abs(R1[0, :3, :3] - R0[0, :3, :3]).max() < 1e-12 and np.abs(L1 - L0).max() < 1e-12
+
+
+def test_a_shank_twisted_one_degree_turns_the_sole_one_degree_about_the_shank(tmp_path):
+    lm, r = _reality(tmp_path, "a3", "link_twist:link=left_shank,deg=1")
+    nominal, real = LegKinematics(lm), LegKinematics(r.sim_legmap)
+    q = np.zeros(12)
+    (L0, _), (L1, _) = nominal.sole_poses_batch(q[None]), real.sole_poses_batch(q[None])
+    dR = L1[0, :3, :3] @ L0[0, :3, :3].T
+    assert np.degrees(np.arccos((np.trace(dR) - 1) / 2)) == pytest.approx(1.0, abs=1e-6)
+    assert r.truth[0]["kind"] == "link_twist" and r.truth[0]["link"] == "left_shank"
+
+
+def test_a_knee_axis_tilted_is_a_joint_axis_effect_and_hip_axis_stays_on_the_hips(tmp_path):
+    lm, r = _reality(tmp_path, "a3", "joint_axis:joint=left_knee,about=x,deg=0.5")
+    nominal, real = LegKinematics(lm), LegKinematics(r.sim_legmap)
+    k = [lm.joint_roles[int(c)] for c in nominal.poe["left"].cols].index("knee")
+    a0, a1 = nominal.poe["left"].S[k][3:], real.poe["left"].S[k][3:]
+    assert np.degrees(np.arccos(a0 @ a1 / np.linalg.norm(a0) / np.linalg.norm(a1))) == pytest.approx(0.5, abs=1e-9)
+    with pytest.raises(ConfigError, match="joint 'left_knee' is not one of"):
+        _reality(tmp_path, "a3", "hip_axis:joint=left_knee,deg=0.5")

@@ -1,0 +1,111 @@
+"""`legcal-bench diagnose`'s report (issue #17): markdown, JSON and plots of a model-gap
+diagnosis (`legcal_bench.evaluation.modelgap.diagnose`), with the truth's offsets error
+and the held-out foot height before/after when the recordings carry them."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def json_ready(report: dict) -> dict:
+    return {k: v for k, v in report.items() if not k.startswith("_")}
+
+
+def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | None:
+    """Offsets RMS error (deg) before/after against the ground truth, if the session has one."""
+    from legcal_bench.data.recording import list_segments, load_truth
+    from legcal_bench.evaluation.metrics import rms
+
+    try:
+        truth = load_truth(list_segments(bags)[0])
+    except Exception:  # a real robot's logs have no truth
+        return None
+    inj = np.asarray(truth.offsets)
+    out = {}
+    for key, field in (("before", "offsets_only_rad"), ("after", "offsets_rad")):
+        x = np.array([report[field][n] for n in joint_names])
+        out[key] = float(np.rad2deg(rms(x - inj)))
+    out["effects_in_truth"] = [e.get("effect") for e in truth.meta.get("reality", {}).get("effects", [])]
+    return out
+
+
+def markdown(report: dict, made_by: str, code: str, truth: dict | None) -> str:
+    d, a = report["detection"], report["after"]
+    L = [f"# Model-gap diagnosis: {report['verdict']}", "", f"Made by `{made_by}` ({code}).", "",
+         f"**{report['summary']}**", "",
+         "| | offsets only | after |", "|---|---|---|",
+         f"| chi2 / dof (training) | {d['chi2_per_dof']:.4f} (p = {d['p_value']:.2g}) | "
+         f"{a['chi2_per_dof']:.4f} (p = {a['p_value']:.2g}) |"]
+    if "heldout" in d:
+        L.append(f"| chi2 / dof (held-out sessions) | {d['heldout']['chi2_per_dof']:.4f} | "
+                 f"{a['heldout']['chi2_per_dof']:.4f} |")
+    if truth:
+        L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {truth['after']:.4f} |")
+    L += ["", f"Decision rules: {report['rules']}; detection at alpha = {report['alpha']}.", ""]
+    if report["parameters"]:
+        L += ["| parameter | value | std | unit |", "|---|---|---|---|"]
+        for n, p in report["parameters"].items():
+            L.append(f"| {n} | {p['value']:.4g} | {p['std']:.2g} | {p['unit']}{' (held: confounded)' if p['held'] else ''} |")
+        L.append("")
+    for c in report["confounded"]:
+        L.append(f"- confounded: {c['text']}")
+    for n in report["notes"]:
+        L.append(f"- {n}")
+    L += ["", "## Selection steps", ""]
+    for st in report["steps"]:
+        L += [f"On top of {st['on_top_of'] or 'the offsets'}:", "",
+              "| effect | delta chi2 | BIC penalty | CV agrees | max offset move (sigma) |", "|---|---|---|---|---|"]
+        for c in st["candidates"]:
+            L.append(f"| {c['effect']} | {c['delta_chi2']:.1f} | {c['bic_penalty']:.1f} | {c['passes_cv']} | "
+                     f"{c['max_offset_move_sigmas']:.1f} |")
+        L.append("")
+    t = report["tracing"]
+    L += ["## Tracing (offsets-only residual)", "", f"Localization: **{t['localization']['location']}**, "
+          f"channel **{t['localization']['channel']}**.", "", "| channel | chi2 / expected |", "|---|---|"]
+    L += [f"| {c} | {v['ratio']:.3f} |" for c, v in t["channels"].items()]
+    L += ["", "| location | delta chi2 | dof |", "|---|---|---|"]
+    L += [f"| {c} | {v['delta_chi2']:.1f} | {v['dof']} |" for c, v in t["locations"].items()]
+    L += ["", "![trace](trace.png)", ""]
+    return "\n".join(L) + "\n"
+
+
+def plot(report: dict, path: Path) -> Path:
+    from legcal_bench.files.plots import pyplot, save_figure
+
+    plt = pyplot()
+    fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
+    tr = [("offsets only", report["tracing"])]
+    if report.get("tracing_after"):
+        tr.append(("after", report["tracing_after"]))
+    top: list = []
+    for k, (label, t) in enumerate(tr):
+        w = 0.4
+        for ax, key, val in ((axes[0], "channels", "ratio"), (axes[1], "stances", "ratio")):
+            names = list(t[key])
+            ax.bar(np.arange(len(names)) + (k - 0.5) * w, [t[key][n][val] for n in names], w, label=label)
+            ax.set_xticks(np.arange(len(names)), names, rotation=30, fontsize=7)
+        names = list(t["locations"])
+        axes[2].bar(np.arange(len(names)) + (k - 0.5) * w,
+                    [max(t["locations"][n]["excess"], 1e-1) for n in names], w, label=label)
+        axes[2].set_xticks(np.arange(len(names)), names, fontsize=8)
+        sig = [(f"{fam}: {s['joint'].replace('_joint', '')}", s["excess"]) for fam, ss in t["signatures"].items()
+               for s in ss]
+        sig = sorted(sig, key=lambda x: -x[1])[:8] if k == 0 else [(n, dict(sig).get(n, 0.0)) for n, _ in top]
+        if k == 0:
+            top = sig
+        axes[3].barh(np.arange(len(sig)) + (k - 0.5) * w, [max(v, 1e-1) for _, v in sig], w, label=label)
+        axes[3].set_yticks(np.arange(len(sig)), [n for n, _ in sig], fontsize=7)
+    axes[0].axhline(1, color="k", lw=0.8, ls="--")
+    axes[1].axhline(1, color="k", lw=0.8, ls="--")
+    axes[0].set_title("chi2 / expected by channel", fontsize=9)
+    axes[1].set_title("chi2 / expected by stance", fontsize=9)
+    axes[2].set_yscale("log")
+    axes[2].set_title("where: excess chi2 explained (score test)", fontsize=9)
+    axes[3].set_xscale("log")
+    axes[3].set_title("signatures: excess chi2 (score test)", fontsize=9)
+    axes[0].legend(fontsize=7)
+    fig.suptitle(report["summary"][:160], fontsize=8)
+    fig.tight_layout()
+    return save_figure(fig, path)
