@@ -16,7 +16,6 @@ Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagno
 from __future__ import annotations
 
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -120,21 +119,10 @@ def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: in
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=("a3",), outside_seeds: int = 10,
         workers: int = 2, progress: bool = True) -> dict:
-    from tqdm import tqdm
+    from legcal_bench.files.parallel import map_with_progress
 
     todo = jobs(robots, seeds, clean_seeds, outside_robots, outside_seeds)
-    rows = []
-    bar = tqdm(total=len(todo), desc="modelgap", unit="set", disable=not progress)
-    if workers <= 1:
-        for j in todo:
-            rows.append(run_case(*j))
-            bar.update(1)
-    else:
-        with ProcessPoolExecutor(workers) as ex:
-            for row in ex.map(_case, todo):
-                rows.append(row)
-                bar.update(1)
-    bar.close()
+    rows = map_with_progress(_case, todo, workers, "modelgap", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
 

@@ -19,7 +19,6 @@ Clean cases (no effect, offsets-only) give the floor.
 from __future__ import annotations
 
 import tempfile
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -125,21 +124,10 @@ def _case(args):
 
 def build(robots, effects=EFFECTS, seeds: int = 10, workers: int = 2, progress: bool = True) -> dict:
     """Every case (clean ones included) on `workers` processes."""
-    from tqdm import tqdm
+    from legcal_bench.files.parallel import map_with_progress
 
     jobs = [(r, e, s) for r in robots for e in (None, *effects) for s in range(seeds)]
-    rows = []
-    bar = tqdm(total=len(jobs), desc="effects-table", unit="set", disable=not progress)
-    if workers <= 1:
-        for j in jobs:
-            rows.append(run_case(*j))
-            bar.update(1)
-    else:
-        with ProcessPoolExecutor(workers) as ex:
-            for row in ex.map(_case, jobs):
-                rows.append(row)
-                bar.update(1)
-    bar.close()
+    rows = map_with_progress(_case, jobs, workers, "effects-table", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
 
