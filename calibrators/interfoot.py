@@ -244,7 +244,6 @@ class InterFootCalibrator(Calibrator):
         problem = _InterFootProblem(kin, segments, w, prior, knees, self.bound)
         t_pre = time.perf_counter() - t0
 
-        all_segments = list(segments)
         # First solve, trim the largest residual frames, solve again.
         t1 = time.perf_counter()
         dq, hist1 = problem.solve(np.zeros(12), self)
@@ -280,8 +279,7 @@ class InterFootCalibrator(Calibrator):
         effects_report = None
         if self.effect_names:
             t3 = time.perf_counter()
-            effects_report, dq_eff, eff_warnings = fit_effects(self, kin, robot, stances, all_segments, w, prior,
-                                                               knees, dq)
+            effects_report, dq_eff, eff_warnings = fit_effects(self, prep, dq)
             warnings += eff_warnings
             effects_report["seconds"] = time.perf_counter() - t3
         return CalibrationResult(
@@ -430,7 +428,7 @@ class _InterFootProblem:
         self.build(kept)
 
 
-def _whitened_problem(kin: LegKinematics, stances: list[Recording]) -> InterFootWeights:
+def _noise_weights(kin: LegKinematics, stances: list[Recording]) -> InterFootWeights:
     """Row weights 1/sigma from the recordings' declared noise (the confound report's
     and the posterior's scaling); raises when the recordings declare none."""
     sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
@@ -456,38 +454,71 @@ def _whitened_jacobian(kin, segs, white, bound, model, x, q_ref) -> np.ndarray:
     return J[:p.n_data_rows]
 
 
-def _solve_with_model(cal: InterFootCalibrator, kin: LegKinematics, segments: list[_Prepared], w, prior, knees,
-                      model: EffectModel, dq0: np.ndarray, held: tuple[int, ...]):
-    """Solve-trim-solve with the effects of `model` from the offsets `dq0`, loads
-    re-evaluated at the new offsets once; returns (x, problem, q_ref)."""
+@dataclass
+class ModelFit:
+    """A fit of the offsets and a set of effects (`fit_model`): the packed solution `x`
+    over `model`'s columns (offsets only: `model` has no effects), the offsets loads are
+    evaluated at, the parameters held at zero (confounded), the confound report at the
+    start and the segments left after trimming."""
+
+    effects: tuple[str, ...]
+    model: EffectModel
+    x: np.ndarray
+    q_ref: np.ndarray
+    held: tuple[str, ...]
+    confounds: dict | None
+    segments: list
+
+
+def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: list[_Prepared] | None = None,
+              dq0: np.ndarray | None = None) -> ModelFit:
+    """Fit the offsets with `effects` (names; none: the offsets-only fit) to `segments`
+    (default: all of `prep`'s), as `calibrate` does: solve, trim, solve; with effects,
+    from the offsets-only estimate `dq0` (fitted here if not given), the confound report
+    at the start (parameters the data cannot separate held at zero), loads re-evaluated
+    at the new offsets once."""
+    segments = prep.segments if segments is None else segments
+    kin = prep.kin
+    trimmed = segments
+    if dq0 is None:
+        problem = _InterFootProblem(kin, segments, prep.w, prep.prior, prep.knees, cal.bound)
+        dq0, _ = problem.solve(np.zeros(12), cal)
+        if cal.trim_fraction > 0:
+            problem.trim(dq0, cal.trim_fraction)
+            dq0, _ = problem.solve(dq0, cal)
+        trimmed = problem.segments
+    model = _effect_model(kin, effects, segments)
+    if not effects:
+        dq0 = np.asarray(dq0, dtype=float)
+        return ModelFit((), model, dq0, dq0, (), None, trimmed)
+    white = _noise_weights(kin, prep.stances)
     x = np.r_[dq0, np.zeros(model.n - 12)]
+    confounds = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x, dq0), model,
+                                prep.robot.joint_names)
+    held = tuple(model.names.index(h) for h in confounds["held"])
     q_ref = dq0
     for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
-        problem = _InterFootProblem(kin, segments, w, prior, knees, cal.bound, model, q_ref, held)
+        problem = _InterFootProblem(kin, segments, prep.w, prep.prior, prep.knees, cal.bound, model, q_ref, held)
         x, _ = problem.solve(x, cal)
         if cal.trim_fraction > 0:
             problem.trim(x, cal.trim_fraction)
             x, _ = problem.solve(x, cal)
         q_ref = x[:12]
-    return x, problem, q_ref
+    return ModelFit(tuple(effects), model, x, q_ref, tuple(confounds["held"]), confounds, problem.segments)
 
 
-def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, stances: list[Recording],
-                segments: list[_Prepared], w: InterFootWeights, prior, knees, dq0: np.ndarray):
-    """The fit with the calibrator's model-gap effects (`--with-effects`), from the
-    offsets-only estimate `dq0`: the confound report at the start (parameters the data
-    cannot separate are held at zero), the same solve-trim-solve as the offsets-only
-    fit, loads re-evaluated at the new offsets once, then the posterior of every
-    parameter from the noise-whitened data rows. Returns (report, offsets, warnings)."""
-    model = _effect_model(kin, cal.effect_names, segments)
-    white = _whitened_problem(kin, stances)
-    x0 = np.r_[dq0, np.zeros(model.n - 12)]
-    before = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x0, dq0), model,
-                             robot.joint_names)
-    held = tuple(model.names.index(h) for h in before["held"])
-    x, problem, q_ref = _solve_with_model(cal, kin, segments, w, prior, knees, model, dq0, held)
-    J = _whitened_jacobian(kin, problem.segments, white, cal.bound, model, x, q_ref)
+def fit_effects(cal: InterFootCalibrator, prep: Prepared, dq0: np.ndarray):
+    """The fit with the calibrator's model-gap effects (`--with-effects`) from the
+    offsets-only estimate `dq0` (`fit_model`), then the posterior of every parameter
+    from the noise-whitened data rows and the confound report at the solution.
+    Returns (report, offsets, warnings)."""
+    robot = prep.robot
+    fit = fit_model(cal, prep, cal.effect_names, dq0=dq0)
+    model, x = fit.model, fit.x
+    J = _whitened_jacobian(prep.kin, fit.segments, _noise_weights(prep.kin, prep.stances), cal.bound, model, x,
+                           fit.q_ref)
     confounds = confound_report(J, model, robot.joint_names)
+    held = [model.names.index(h) for h in fit.held]
     free = [i for i in range(model.n) if i not in held]
     H = J[:, free].T @ J[:, free]
     cov = np.full((model.n, model.n), np.nan)
@@ -506,51 +537,14 @@ def fit_effects(cal: InterFootCalibrator, kin: LegKinematics, robot: LegMap, sta
         "offsets_only_rad": {n: float(v) for n, v in zip(robot.joint_names, dq0)},
         "offsets_rad": {n: float(v) for n, v in zip(robot.joint_names, x[:12])},
         "offsets_std_rad": {n: float(v) for n, v in zip(robot.joint_names, std[:12])},
-        "confounds": confounds, "confounds_at_start": before,
-        "frames_used": int(sum(len(s.frames) for s in problem.segments)),
+        "confounds": confounds, "confounds_at_start": fit.confounds,
+        "frames_used": int(sum(len(s.frames) for s in fit.segments)),
     }
     warnings = [f"effects: {line}" for line in confound_lines(confounds)]
     return report, x[:12], warnings
 
 
-@dataclass
-class ModelFit:
-    """A fit of the offsets and a set of effects (`fit_model`): the packed solution `x`
-    over `model`'s columns (offsets only: `model` has no effects), the offsets loads are
-    evaluated at, the parameters held at zero (confounded) and the confound report."""
-
-    effects: tuple[str, ...]
-    model: EffectModel
-    x: np.ndarray
-    q_ref: np.ndarray
-    held: tuple[str, ...]
-    confounds: dict | None
-
-
-def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: list[_Prepared] | None = None,
-              dq0: np.ndarray | None = None) -> ModelFit:
-    """Fit the offsets with `effects` (names; none: the offsets-only fit) to `segments`
-    (default: all of `prep`'s), as `calibrate` does: solve, trim, solve; with effects,
-    from the offsets-only estimate `dq0` (fitted here if not given), confounded
-    parameters held at zero."""
-    segments = prep.segments if segments is None else segments
-    kin = prep.kin
-    if dq0 is None:
-        problem = _InterFootProblem(kin, segments, prep.w, prep.prior, prep.knees, cal.bound)
-        dq0, _ = problem.solve(np.zeros(12), cal)
-        if cal.trim_fraction > 0:
-            problem.trim(dq0, cal.trim_fraction)
-            dq0, _ = problem.solve(dq0, cal)
-    model = _effect_model(kin, effects, segments)
-    if not effects:
-        return ModelFit((), model, np.asarray(dq0, dtype=float), np.asarray(dq0, dtype=float), (), None)
-    white = _whitened_problem(kin, prep.stances)
-    x0 = np.r_[dq0, np.zeros(model.n - 12)]
-    confounds = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x0, dq0), model,
-                                prep.robot.joint_names)
-    held = tuple(model.names.index(h) for h in confounds["held"])
-    x, _, q_ref = _solve_with_model(cal, kin, segments, prep.w, prep.prior, prep.knees, model, dq0, held)
-    return ModelFit(tuple(effects), model, x, q_ref, tuple(confounds["held"]), confounds)
+NOISE_TILT = "imu_tilt"  # the effect whose columns carry the IMU's noise
 
 
 @dataclass
@@ -566,15 +560,18 @@ class FrameResiduals:
     r: np.ndarray
     J: np.ndarray
     J_fixed: np.ndarray
-    G: np.ndarray
-    H: np.ndarray
     segment: np.ndarray
     recording: np.ndarray
     q_enc: np.ndarray
     time_index: np.ndarray
 
+    @property
+    def G(self) -> np.ndarray:
+        return self.J_fixed[:, :, :12]
 
-NOISE_TILT = "imu_tilt"  # the effect whose columns carry the IMU's noise
+    @property
+    def H(self) -> np.ndarray:
+        return self.J_fixed[:, :, self.model.slices[NOISE_TILT]][:, :, :2]
 
 
 def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, segments: list[_Prepared],
@@ -593,7 +590,6 @@ def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, seg
     problem.means_at(x)
     _, J_fix = problem.evaluate(x, "fixed")
     r, J = problem.evaluate(x, "projected")
-    tilt = model.slices[NOISE_TILT]
     rows, Js, Jfs, seg_idx, rec, q, tix = [], [], [], [], [], [], []
     pos = 0
     for i, seg in enumerate(segments):
@@ -612,7 +608,5 @@ def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, seg
         q.append(seg.q_enc)
         tix.append(seg.frames)
         pos += 11 * n
-    J_fixed = np.concatenate(Jfs)
-    return FrameResiduals(model, np.concatenate(rows), np.concatenate(Js), J_fixed, J_fixed[:, :, :12],
-                          J_fixed[:, :, tilt][:, :, :2], np.concatenate(seg_idx), np.concatenate(rec),
-                          np.concatenate(q), np.concatenate(tix))
+    return FrameResiduals(model, np.concatenate(rows), np.concatenate(Js), np.concatenate(Jfs),
+                          np.concatenate(seg_idx), np.concatenate(rec), np.concatenate(q), np.concatenate(tix))

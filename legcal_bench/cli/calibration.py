@@ -278,8 +278,9 @@ def cmd_export(a: argparse.Namespace) -> int:
 
 def cmd_diagnose(a: argparse.Namespace) -> int:
     """The model-gap loop on a set of recordings: verdict, effects, tracing (markdown, JSON, plot)."""
-    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.calibrators.base import CalibrationResult, get_calibrator
     from legcal_bench.data.recording import load_session
+    from legcal_bench.errors import CalibrationError
     from legcal_bench.evaluation.modelgap import diagnose
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
@@ -292,14 +293,13 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     options = {"setting": "sensor"}
     if a.result:
         try:
-            res = json.loads(Path(a.result).read_text())
-        except (OSError, ValueError) as e:
-            raise ConfigError(f"--result {a.result}: not a readable result JSON ({e}); give the file "
-                              "legcal-bench calibrate --out wrote") from None
-        if res.get("calibrator") != "interfoot":
-            raise ConfigError(f"--result {a.result}: calibrator {res.get('calibrator')!r}; the diagnosis refits "
+            res = CalibrationResult.load(a.result)
+        except CalibrationError as e:
+            raise ConfigError(f"--result: {e}; give the file legcal-bench calibrate --out wrote") from None
+        if res.calibrator != "interfoot":
+            raise ConfigError(f"--result {a.result}: calibrator {res.calibrator!r}; the diagnosis refits "
                               "with interfoot's residuals (calibrate with --calibrator interfoot)")
-        setting = res.get("settings", {}).get("setting")
+        setting = res.settings.get("setting")
         if setting:
             options["setting"] = setting
     cal = get_calibrator("interfoot", **options)

@@ -18,7 +18,7 @@ import numpy as np
 RANK_RTOL = 1e-8
 
 
-def _basis(A: np.ndarray) -> np.ndarray:
+def basis(A: np.ndarray) -> np.ndarray:
     """Orthonormal basis of span(A) (columns), rank by `RANK_RTOL`."""
     if A.shape[1] == 0:
         return A
@@ -28,15 +28,15 @@ def _basis(A: np.ndarray) -> np.ndarray:
 
 def chi2_after(z: np.ndarray, A: np.ndarray) -> float:
     """|z - A d|^2 at the least-squares step d."""
-    Q = _basis(A)
+    Q = basis(A)
     return float(z @ z - np.sum((Q.T @ z) ** 2))
 
 
 def score(z: np.ndarray, N: np.ndarray, C: np.ndarray) -> tuple[float, int]:
     """(delta_chi2, degrees of freedom) of columns C beyond the nuisance columns N."""
-    Qn = _basis(N)
+    Qn = basis(N)
     Cp = C - Qn @ (Qn.T @ C)
     zp = z - Qn @ (Qn.T @ z)
-    Qc = _basis(Cp) if np.abs(Cp).max(initial=0.0) > RANK_RTOL * max(np.abs(C).max(initial=0.0), 1e-300) \
+    Qc = basis(Cp) if np.abs(Cp).max(initial=0.0) > RANK_RTOL * max(np.abs(C).max(initial=0.0), 1e-300) \
         else Cp[:, :0]
     return float(np.sum((Qc.T @ zp) ** 2)), int(Qc.shape[1])

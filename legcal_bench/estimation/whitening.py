@@ -26,8 +26,6 @@ from dataclasses import dataclass
 import numpy as np
 
 RANK_RTOL = 1e-6  # eigenvalues below this fraction of a frame's largest are the rows' dependence, not noise
-FEET_ROWS = slice(0, 6)
-FLAT_ROWS = slice(6, 11)
 # The 11 rows of a frame, by channel (tracing reads these names).
 ROW_CHANNELS = ("feet_translation",) * 3 + ("feet_rotation",) * 3 + ("flat_height",) + ("sole_tilt_left",) * 2 \
     + ("sole_tilt_right",) * 2

@@ -37,7 +37,7 @@ from scipy.stats import chi2 as chi2_dist
 
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.effects import joint_loads, load_effects, registry
-from legcal_bench.estimation.lineartests import _basis, chi2_after, score
+from legcal_bench.estimation.lineartests import basis, chi2_after, score
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
 from legcal_bench.estimation.whitening import ROW_CHANNELS, expected_rows, frame_covariances, whitening
@@ -312,7 +312,6 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
         "summary": "",
     }
     report["summary"] = summary_line(report)
-    report["_frames"] = {"before": base, "after": final}  # for plots; dropped from JSON
     return report
 
 
@@ -349,28 +348,21 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
         idx = [i for i, x in enumerate(ROW_CHANNELS) if x == c]
         o, e = float((z[:, idx] ** 2).sum()), float(expect[:, idx].sum())
         out["channels"][c] = {"chi2": o, "expected": e, "ratio": o / e}
-    seg_names = [s.name for s in ctx.prep.segments]
     for s in np.unique(fr.segment):
         m = fr.segment == s
         o, e = float((z[m] ** 2).sum()), float(expect[m].sum())
-        out["stances"][seg_names[s] if s < len(seg_names) else str(s)] = {"chi2": o, "expected": e, "ratio": o / e}
+        out["stances"][ctx.prep.segments[s].name] = {"chi2": o, "expected": e, "ratio": o / e}
     # Every column with the segment means re-estimated, as in the fit; the fit's own
     # columns are the nuisance.
 
     def whiten(C):
         return np.einsum("nij,njk->nik", W, project_means(C, fr.segment)).reshape(n * 11, -1)
 
-    Qn = _basis(ev.Jw)
+    Qn = basis(ev.Jw)
     zr = ev.z - Qn @ (Qn.T @ ev.z)
-    kin = ctx.prep.kin
     # Locations: a generic geometric error of each leg, the IMU's tilt.
-    from legcal_bench.estimation.effects import EffectModel
-
-    groups = {}
-    for side in SIDES:
-        m = EffectModel(kin, [LegGeometry(side)])
-        J = _extra_columns(ctx, ev.fit, fr, m)
-        groups[f"{side} leg"] = whiten(J)
+    legs = _extra_columns(ctx, ev.fit, [LegGeometry(side) for side in SIDES])
+    groups = {f"{side} leg": whiten(J) for side, J in zip(SIDES, legs)}
     groups["IMU"] = whiten(fr.H)
     for name, C in groups.items():
         d, dof = score(zr, Qn, C)
@@ -407,15 +399,13 @@ def _log10_sf(x: float, dof: int) -> float:
     return float(chi2_dist.logsf(x, max(dof, 1)) / np.log(10)) if dof > 0 else 0.0
 
 
-def _extra_columns(ctx: Context, fit, fr, model) -> np.ndarray:
-    """(N, 11, P) the held-mean Jacobian of `model`'s effect columns at `fit`'s offsets
-    over the frames of `fr` (same segments, same order)."""
+def _extra_columns(ctx: Context, fit, effects) -> list[np.ndarray]:
+    """Per effect of `effects` (instances, at zero), its held-mean Jacobian columns
+    (N, 11, P) at `fit` over all the segments (one evaluation for all)."""
     from legcal_bench.calibrators.interfoot import frame_residuals
 
-    segs = [s for i, s in enumerate(ctx.prep.segments) if i in set(fr.segment.tolist())]
-    ex = frame_residuals(ctx.cal, ctx.prep, fit, segs, extra=model.effects)
-    cols = [ex.model.slices[e.name] for e in model.effects]
-    return np.concatenate([ex.J_fixed[:, :, sl] for sl in cols], axis=2)
+    ex = frame_residuals(ctx.cal, ctx.prep, fit, ctx.prep.segments, extra=effects)
+    return [ex.J_fixed[:, :, ex.model.slices[e.name]] for e in effects]
 
 
 def _loads(ctx: Context, fr) -> np.ndarray | None:

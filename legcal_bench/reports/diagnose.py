@@ -15,13 +15,13 @@ def json_ready(report: dict) -> dict:
 
 def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | None:
     """Offsets RMS error (deg) before/after against the ground truth, if the session has one."""
-    from legcal_bench.data.recording import list_segments, load_truth
+    from legcal_bench.data.recording import list_segments, load_truth, truth_path
     from legcal_bench.evaluation.metrics import rms
 
-    try:
-        truth = load_truth(list_segments(bags)[0])
-    except Exception:  # a real robot's logs have no truth
+    first = list_segments(bags, allow_partial=True)[0]
+    if not truth_path(first).is_file():  # a real robot's logs have no truth
         return None
+    truth = load_truth(first)
     inj = np.asarray(truth.offsets)
     out = {}
     for key, field in (("before", "offsets_only_rad"), ("after", "offsets_rad")):
@@ -79,7 +79,7 @@ def plot(report: dict, path: Path) -> Path:
     tr = [("offsets only", report["tracing"])]
     if report.get("tracing_after"):
         tr.append(("after", report["tracing_after"]))
-    top: list = []
+    top: list[str] = []  # the offsets-only fit's strongest signatures, shown for both fits
     for k, (label, t) in enumerate(tr):
         w = 0.4
         for ax, key, val in ((axes[0], "channels", "ratio"), (axes[1], "stances", "ratio")):
@@ -90,11 +90,10 @@ def plot(report: dict, path: Path) -> Path:
         axes[2].bar(np.arange(len(names)) + (k - 0.5) * w,
                     [max(t["locations"][n]["excess"], 1e-1) for n in names], w, label=label)
         axes[2].set_xticks(np.arange(len(names)), names, fontsize=8)
-        sig = [(f"{fam}: {s['joint'].replace('_joint', '')}", s["excess"]) for fam, ss in t["signatures"].items()
-               for s in ss]
-        sig = sorted(sig, key=lambda x: -x[1])[:8] if k == 0 else [(n, dict(sig).get(n, 0.0)) for n, _ in top]
-        if k == 0:
-            top = sig
+        sig = {f"{fam}: {s['joint'].replace('_joint', '')}": s["excess"] for fam, ss in t["signatures"].items()
+               for s in ss}
+        top = top or sorted(sig, key=lambda n: -sig[n])[:8]
+        sig = [(n, sig.get(n, 0.0)) for n in top]
         axes[3].barh(np.arange(len(sig)) + (k - 0.5) * w, [max(v, 1e-1) for _, v in sig], w, label=label)
         axes[3].set_yticks(np.arange(len(sig)), [n for n, _ in sig], fontsize=7)
     axes[0].axhline(1, color="k", lw=0.8, ls="--")
