@@ -30,11 +30,13 @@ from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.confounds import confound_lines, confound_report
+from legcal_bench.estimation.coplanarity import StanceContact, check_stances
 from legcal_bench.estimation.datacheck import data_warnings
 from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
 from legcal_bench.estimation.levelling import levelling_rotations, tilted, up_in_base
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.observability import analyze, observability_warnings
+from legcal_bench.estimation.whitening import frame_covariances, whitening
 from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.preprocess import filter_warnings, select_frames
 from legcal_bench.estimation.problem import Block, Problem
@@ -111,14 +113,19 @@ class InterFootCalibrator(Calibrator):
                  lambda_knee: float | None = None, knee_prior_shift_rad: float = 0.0,
                  trim_fraction: float = paper.TRIM_FRACTION, bound: float = paper.OFFSET_BOUND_RAD,
                  max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10,
-                 imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S, effects: str = ""):
+                 imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S, effects: str = "",
+                 contact_check: str = "flag"):
         if setting not in SETTING_NAMES:
             raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in ("projected", "alternating"):
             raise CalibrationError(f"solver {solver!r}: use projected (default) or alternating (the paper's)")
         if jacobian not in ("analytic", "2-point"):
             raise CalibrationError(f"jacobian {jacobian!r}: use analytic or 2-point (forward differences)")
+        if contact_check not in CONTACT_CHECKS:
+            raise CalibrationError(f"contact_check {contact_check!r}: use flag (default: warn about a stance whose "
+                                   "soles were not on one plane), drop (also refit without it) or off")
         self.setting, self.solver, self.jacobian = setting, solver, jacobian
+        self.contact_check = contact_check
         self.overrides = {k: number_option(k, v, 0.0) for k, v in dict(
             lambda_f=lambda_f, lambda_g=lambda_g, lambda_q=lambda_q, lambda_knee=lambda_knee).items() if v is not None}
         self.knee_prior_shift_rad = number_option("knee_prior_shift_rad", knee_prior_shift_rad, -0.5, 0.5)
@@ -142,7 +149,7 @@ class InterFootCalibrator(Calibrator):
         return {"setting": self.setting, "solver": self.solver, "jacobian": self.jacobian, **self.overrides,
                 "knee_prior_shift_rad": self.knee_prior_shift_rad, "trim_fraction": self.trim_fraction,
                 "bound": self.bound, "max_outer": self.max_outer, "preprocess": asdict(self.preprocess),
-                "effects": list(self.effect_names)}
+                "effects": list(self.effect_names), "contact_check": self.contact_check}
 
     @staticmethod
     def _posterior(kin: LegKinematics, robot: LegMap, stances: list[Recording], problem, dq: np.ndarray,
@@ -252,6 +259,24 @@ class InterFootCalibrator(Calibrator):
             dq, hist2 = problem.solve(dq, self)
         else:
             hist2 = []
+        contacts, dropped = None, []
+        if self.contact_check != "off":
+            contacts = contact_check(self, prep, problem.segments, dq)
+            flagged = [c for c in contacts or [] if c.flagged]
+            warnings += [c.text() for c in flagged]
+            kept = [s for s in problem.segments if s.recording not in {c.recording for c in flagged}]
+            if flagged and self.contact_check == "drop" and len({s.recording for s in kept}) < 2:
+                warnings.append(f"contact_check=drop: not dropped: fewer than two stances would be left of "
+                                f"{len(contacts)}; these data do not fit soles on one flat floor (re-record)")
+            elif flagged and self.contact_check == "drop":
+                dropped = [c.recording for c in flagged]
+                problem.build(kept)
+                dq, hist3 = problem.solve(dq, self)
+                hist2 += hist3
+                warnings.append(f"contact_check=drop: fitted without {', '.join(dropped)}")
+            elif flagged:
+                warnings.append("contact_check: rerun with --option contact_check=drop to fit without "
+                                f"{', '.join(c.recording for c in flagged)}, or re-record on a flat floor")
         t_solve = time.perf_counter() - t1
 
         t2 = time.perf_counter()
@@ -298,6 +323,8 @@ class InterFootCalibrator(Calibrator):
                 "pitch_signs": signs.tolist(),
                 "posterior": post if post is not None else {"note": NO_NOISE},
                 "imu_tilt_response": tilt_response.tolist(),
+                "contact_check": None if contacts is None else {"stances": [c.to_dict() for c in contacts],
+                                                                "dropped": dropped},
                 **({"effects": effects_report} if effects_report is not None else {}),
             },
             timing_s={"preprocess": t_pre, "solve": t_solve, "observability": t_obs,
@@ -610,3 +637,57 @@ def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, seg
         pos += 11 * n
     return FrameResiduals(model, np.concatenate(rows), np.concatenate(Js), np.concatenate(Jfs),
                           np.concatenate(seg_idx), np.concatenate(rec), np.concatenate(q), np.concatenate(tix))
+
+
+CONTACT_CHECKS = ("flag", "drop", "off")
+
+
+def contact_check(cal: InterFootCalibrator, prep: Prepared, segments: list[_Prepared],
+                  dq0: np.ndarray) -> list[StanceContact] | None:
+    """The per-stance coplanarity check (`legcal_bench.estimation.coplanarity`) of
+    `segments` (a fit's, after trimming), from offsets `dq0`: on the noise-weighted
+    problem without priors whatever the calibrator's setting (a prior's pull would show
+    as a departure), stances tested against the others; the worst flagged stance is set
+    aside and the rest tested again without it, while three or more remain (one bad
+    stance would otherwise spoil the others' predictions). None when the recordings
+    declare no noise to judge it against or have a single stance."""
+    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
+    if sig is None or len({s.recording for s in segments}) < 2:
+        return None
+    problem = _InterFootProblem(prep.kin, segments, _noise_weights(prep.kin, prep.stances), None, [], cal.bound)
+    dq, _ = problem.solve(dq0, cal)
+    final: dict[str, StanceContact] = {}
+    while True:
+        results = _stance_contacts(cal, prep, problem, dq, sig)
+        bad = [c for c in results if c.flagged]
+        if not bad or len(results) <= 2:
+            final.update({c.recording: c for c in results})
+            break
+        worst = max(bad, key=lambda c: c.chi2)
+        final[worst.recording] = worst
+        problem.build([s for s in problem.segments if s.recording != worst.recording])
+        dq, _ = problem.solve(dq, cal)
+    return [final[n] for n in dict.fromkeys(s.recording for s in segments)]
+
+
+def _stance_contacts(cal, prep, problem, dq, sig) -> list[StanceContact]:
+    segs = problem.segments
+    names = list(dict.fromkeys(s.recording for s in segs))
+    fit = ModelFit((), _effect_model(prep.kin, (), segs), dq, dq, (), None, segs)
+    fr = frame_residuals(cal, prep, fit, segs)
+    W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
+    Jw = W @ fr.J[:, :, :12]
+    info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
+    total = sum(info.values())
+    means = problem.means_at(dq)
+    r, J = problem.evaluate(dq, "projected")
+    owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
+    items = []
+    for i, s in enumerate(segs):
+        rest = owner != s.recording
+        delta = -np.linalg.lstsq(J[rest], r[rest], rcond=None)[0]
+        m = fr.segment == i
+        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12], "delta": delta,
+                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True),
+                      "left_tilt": fr.r[m, 7:9].mean(axis=0)})
+    return check_stances(items, sig["encoder"])

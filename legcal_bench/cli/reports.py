@@ -86,6 +86,29 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_contact_table(a: argparse.Namespace) -> int:
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.files.reports import write_report
+    from legcal_bench.provenance import code_version, describe
+    from legcal_bench.reports.contact_table import CASES, build, markdown
+
+    unknown = sorted(set(a.cases) - set(CASES))
+    if unknown:
+        raise ConfigError(f"--cases {unknown}: use cases from {list(CASES)}")
+    if a.seeds < 1:
+        raise ConfigError(f"--seeds {a.seeds}: need at least 1")
+    cases = " ".join(f"'{c}'" if " " in c else c for c in a.cases)
+    made_by = f"legcal-bench contact-table --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
+    code = code_version()
+    data = build(a.robots, a.cases, a.seeds, a.workers, progress=not a.quiet)
+    data.update(made_by=made_by, code=code)
+    md = markdown(data, made_by, describe(code))
+    write_report(a.out, md, data, name="contact_table")
+    print(md)
+    print(f"wrote {a.out}/contact_table.md, .json")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import G1_EXAMPLE
 
@@ -133,6 +156,18 @@ def add_commands(sub) -> None:
     et.add_argument("--out", default="reports/effects")
     et.add_argument("--quiet", action="store_true")
     et.set_defaults(func=cmd_effects_table)
+
+    from legcal_bench.reports.contact_table import CASES
+
+    ct = sub.add_parser("contact-table", help="the per-stance contact check measured: clean data, a wedge under one "
+                                              "sole in one stance, the contact floor (flags against the truth)")
+    ct.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
+    ct.add_argument("--cases", nargs="+", default=list(CASES))
+    ct.add_argument("--seeds", type=int, default=5)
+    ct.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+    ct.add_argument("--out", default="reports/contact_check")
+    ct.add_argument("--quiet", action="store_true")
+    ct.set_defaults(func=cmd_contact_table)
 
     rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
     rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")

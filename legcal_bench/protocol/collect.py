@@ -28,7 +28,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, STANCES, feasible_trajec
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
-from legcal_bench.sim.effects import build_reality
+from legcal_bench.sim.effects import build_reality, floor_stances
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
@@ -138,17 +138,20 @@ def is_collected(out_dir: str | Path, cfg: CollectConfig) -> bool:
 
 
 def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: int, jitter_m: float,
-                   jitter_rad: float, progress=None, period_scale: float = 1.0, catalog: dict = ALL_STANCES) -> Segment:
+                   jitter_rad: float, progress=None, period_scale: float = 1.0, catalog: dict = ALL_STANCES,
+                   stance_session: bool = False) -> Segment:
     """Run one segment of `stance` (fitted to the robot, `fit_stance`). The posture
     motion's IK is solved once, in one batch (`feasible_trajectory`), and handed to the
-    simulator (`DoubleSupportSim.run`)."""
+    simulator (`DoubleSupportSim.run`). `stance_session`: this is the stance's own
+    (training) session, where a shim placed in that stance only sits."""
     rng = np.random.default_rng(seed)  # the stream Gymnasium's reset(seed=seed) gives the env
     fitted = fit_stance(catalog[stance], sim.nominal)
     for attempt in range(PLACEMENT_TRIES):
         # A jittered placement out of reach is drawn again (the built-ins never need to).
         placement = place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad)
         try:
-            sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing")
+            sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing",
+                      stance=stance if stance_session else None)
             break
         except IKError as e:
             if attempt == PLACEMENT_TRIES - 1:
@@ -221,6 +224,10 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
         reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor)
     catalog, stances = stance_catalog(cfg)
+    unknown = sorted(floor_stances(reality.floor) - set(stances))
+    if unknown:
+        raise ConfigError(f"--effect shim:...,stance={unknown[0]}: stance {unknown[0]!r} is not recorded; "
+                          f"use one of {list(stances)}")
     ss = np.random.SeedSequence(cfg.seed)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0]), catalog, stances))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
@@ -236,7 +243,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
         for (name, kind, stance, duration, jm, jr), seed in zip(plan, seeds):
             bar.set_postfix_str(name)
             obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar,
-                                                                 cfg.period_scale, catalog)
+                                                                 cfg.period_scale, catalog, kind == "stance")
             hold = check_hold(sim, name, stance, tr, gains.note if gains else "", catalog[stance].label)
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,

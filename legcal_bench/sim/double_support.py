@@ -46,7 +46,7 @@ from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
-from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints
+from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SimSensors
 
@@ -131,11 +131,13 @@ class DoubleSupportSim:
     def _model_joint_names(self) -> list[str]:
         return [self.true_kin.model.names[j] for j in range(1, self.true_kin.model.njoints)]
 
-    def _placed(self, side: str, T: pin.SE3) -> pin.SE3:
+    def _placed(self, side: str, T: pin.SE3, stance: str | None = None) -> pin.SE3:
         """Where the simulated sole really sits: the placement on the sloped floor (if
-        any, about the stance frame's origin), with its shim (if any, about the sole)."""
-        F, S = self.floor.get(side), self.floor.get("slope")
-        T = T if F is None else T * pin.SE3(F[:3, :3], F[:3, 3])
+        any, about the stance frame's origin), with its shims (if any, about the sole:
+        the one in every session, then the one in `stance`'s session only)."""
+        for F in (self.floor.get(side), None if stance is None else self.floor.get(floor_key(side, stance))):
+            T = T if F is None else T * pin.SE3(F[:3, :3], F[:3, 3])
+        S = self.floor.get("slope")
         return T if S is None else pin.SE3(S[:3, :3], S[:3, 3]) * T
 
     # ------------------------------------------------------------------ public
@@ -147,11 +149,13 @@ class DoubleSupportSim:
     def posture(self) -> np.ndarray:
         return self._posture.copy()
 
-    def reset(self, left: pin.SE3, right: pin.SE3, posture: np.ndarray, standing: bool = False) -> None:
+    def reset(self, left: pin.SE3, right: pin.SE3, posture: np.ndarray, standing: bool = False,
+              stance: str | None = None) -> None:
         """Plant the soles at `left`/`right` (stance frame) with the pelvis at `posture`
-        (standing: the straight-leg posture is solved instead), then let the servos settle."""
+        (standing: the straight-leg posture is solved instead), then let the servos settle.
+        `stance` names the session's stance for a shim placed in it only (`floor`)."""
         self.left, self.right, self.standing = left, right, standing
-        self.true_left, self.true_right = self._placed("left", left), self._placed("right", right)
+        self.true_left, self.true_right = self._placed("left", left, stance), self._placed("right", right, stance)
         self.time = 0.0
         if standing:
             knee = self.sim_legmap.knee_straight_rad + self.knee_straight_error_rad

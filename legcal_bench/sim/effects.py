@@ -31,7 +31,9 @@ collection seed. Units at this edge: degrees, millimetres, N m/rad, fractions.
                                        encoder reads, and the link: a passive hinge
                                        `legcal_compliance_<joint>` on the same body and axis
   shim:side=left,roll=0.5,pitch=0      a wedge under one sole (deg): that sole's placement
-                                       tilted about its own origin (weld, kinematic modes)
+                                       tilted about its own origin (weld, kinematic modes);
+                                       with stance=II only in that stance's session (a
+                                       pebble under one foot once), else in every session
   slope:roll=0.3,pitch=0               the floor tilted (deg): both placements rotated about
                                        the stance frame's origin, gravity unchanged (weld,
                                        kinematic modes)
@@ -63,7 +65,7 @@ ABOUT = ("x", "y", "z")
 @dataclass(frozen=True)
 class EffectKind:
     name: str
-    keys: dict  # key -> (kind, default): kind "joint" | "link" | "side" | "about" | "number"
+    keys: dict  # key -> (kind, default): kind "joint" | "link" | "side" | "about" | "stance" | "number"
     help: str
 
 
@@ -82,8 +84,9 @@ KINDS = {k.name: k for k in (
                "link twisted about its long axis (deg)"),
     EffectKind("compliance", {"joint": ("joint", None), "k": ("number", None)},
                "series spring between motor and link (N m/rad)"),
-    EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0)},
-               "wedge under one sole (deg)"),
+    EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0),
+                        "stance": ("stance", None)},
+               "wedge under one sole (deg), in every session or only in one stance's (stance=NAME)"),
     EffectKind("slope", {"roll": ("number", 0.0), "pitch": ("number", 0.0)}, "floor slope (deg)"),
 )}
 EFFECTS_HELP = ("NAME:key=value,... with NAME one of " + "; ".join(
@@ -130,6 +133,16 @@ def parse_effect(spec: str) -> RealityEffect:
     return RealityEffect(name, values, s)
 
 
+def floor_key(side: str, stance: str) -> str:
+    """The `Reality.floor` key of a shim under `side` in `stance`'s session only."""
+    return f"{side}@{stance}"
+
+
+def floor_stances(floor: dict) -> set[str]:
+    """The stances a per-stance shim in `floor` names."""
+    return {k.partition("@")[2] for k in floor if "@" in k}
+
+
 def joint_label(legmap: LegMap, index: int) -> str:
     """`left_knee`-style name of leg joint `index` (side and role)."""
     return f"{SIDES[index // 6]}_{legmap.joint_roles[index]}"
@@ -162,7 +175,9 @@ class Reality:
 
     sim_legmap: LegMap
     sensors: SimSensors
-    floor: dict = field(default_factory=dict)  # side -> (4, 4) tilt of that sole's placement; "slope" -> floor tilt
+    # side -> (4, 4) tilt of that sole's placement in every session, "side@stance" -> in
+    # that stance's session only; "slope" -> the floor's tilt
+    floor: dict = field(default_factory=dict)
     truth: list = field(default_factory=list)  # one dict per effect: its resolved target and SI values
 
     def describe(self) -> dict:
@@ -193,9 +208,10 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
             side = _choice(v["side"], SIDES, rng, e.spec, "side")
             T = np.eye(4)
             T[:3, :3] = Rotation.from_euler("xy", np.deg2rad([v["roll"], v["pitch"]])).as_matrix()
-            floor[side] = floor.get(side, np.eye(4)) @ T
+            key = side if v["stance"] is None else floor_key(side, v["stance"])
+            floor[key] = floor.get(key, np.eye(4)) @ T
             truth.append({"effect": e.spec, "kind": e.kind, "side": side, "roll_rad": float(np.deg2rad(v["roll"])),
-                          "pitch_rad": float(np.deg2rad(v["pitch"]))})
+                          "pitch_rad": float(np.deg2rad(v["pitch"])), "stance": v["stance"]})
         elif e.kind == "slope":
             T = np.eye(4)
             T[:3, :3] = Rotation.from_euler("xy", np.deg2rad([v["roll"], v["pitch"]])).as_matrix()

@@ -1,0 +1,88 @@
+"""The per-stance contact check (issue #16): a wedge under one sole in one stance is
+flagged, its size and sole read right, the stance dropped on request; clean data of the
+same seed is not flagged."""
+
+import numpy as np
+import pytest
+
+from legcal_bench.calibrators.interfoot import InterFootCalibrator
+from legcal_bench.data.recording import list_segments, load_session, load_truth
+from legcal_bench.errors import CalibrationError, ConfigError
+from legcal_bench.estimation.coplanarity import coplanarity
+from legcal_bench.geometry.lie import Exp
+from legcal_bench.protocol.collect import CollectConfig, collect
+from legcal_bench.reports.contact_table import true_departures
+from legcal_bench.robots import load_robot
+
+
+def test_the_departure_jacobian_matches_finite_differences():
+    M = Exp(np.r_[0.01, 0.25, 0.003, 0.02, -0.015, 0.4])
+    _, D = coplanarity(M)
+    eps = 1e-7
+    num = np.empty((3, 6))
+    for i in range(6):
+        xi = np.zeros(6)
+        xi[i] = eps
+        num[:, i] = (coplanarity(M @ Exp(xi))[0] - coplanarity(M @ Exp(-xi))[0]) / (2 * eps)
+    assert np.allclose(num, D, atol=1e-8)
+    # A wedge of a about x under the left sole puts the right sole at -a about x.
+    a = np.deg2rad(0.3)
+    c, _ = coplanarity(Exp(np.r_[0, 0.2, 0, -a, 0, 0]))
+    assert np.isclose(c[0], -np.sin(a), rtol=1e-12) and abs(c[1]) < 1e-12
+
+
+@pytest.fixture(scope="module")
+def sets(tmp_path_factory):
+    out = {}
+    for name, effects in (("clean", ()), ("wedge", ("shim:side=left,roll=0.3,stance=II",))):
+        d = tmp_path_factory.mktemp(name)
+        collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=3, effects=effects), d,
+                progress=False)
+        out[name] = d
+    return out
+
+
+def test_a_wedge_in_one_stance_sits_only_in_that_stance(sets):
+    truth = true_departures(list_segments(sets["wedge"]))
+    assert np.isclose(np.rad2deg(truth["stance_II"][0]), -0.3, atol=1e-3)
+    for name in ("stance_I", "stance_III", "stance_IV"):
+        assert np.rad2deg(np.abs(truth[name][:2])).max() < 1e-3
+    held = [p for p in list_segments(sets["wedge"]) if p.stem.startswith("heldout")]
+    assert all(load_truth(p).meta["reality"]["effects"][0]["stance"] == "II" for p in held)
+
+
+def test_the_wedged_stance_is_flagged_read_right_and_dropped(sets):
+    legmap = load_robot("a3")
+    recs = load_session(sets["wedge"], robot=legmap)
+    res = InterFootCalibrator().calibrate(legmap, recs)
+    check = {c["recording"]: c for c in res.diagnostics["contact_check"]["stances"]}
+    assert [n for n, c in check.items() if c["flagged"]] == ["stance_II"]
+    c = check["stance_II"]
+    assert c["sole"] == "left"
+    # The estimate against the truth (-0.3 deg, 1.52 mm); its std is ~0.004 deg, 0.03 mm.
+    assert abs(np.rad2deg(c["tilt_rad"][0]) + 0.3) < 0.02 and abs(np.rad2deg(c["tilt_rad"][1])) < 0.02
+    assert any("stance_II: the soles were not on one plane" in w for w in res.warnings)
+    dropped = InterFootCalibrator(contact_check="drop").calibrate(legmap, recs)
+    assert dropped.diagnostics["contact_check"]["dropped"] == ["stance_II"]
+    assert "stance_II" not in dropped.diagnostics["segments"]
+    injected = np.asarray(load_truth(list_segments(sets["wedge"])[0]).offsets)
+
+    def err(r):
+        return np.sqrt(np.mean((np.array([r.offsets_rad[n] for n in legmap.joint_names]) - injected) ** 2))
+
+    assert err(dropped) < 0.7 * err(res)  # measured 0.150 deg vs 0.28 deg (contact-table)
+
+
+def test_clean_data_of_the_same_seed_is_not_flagged(sets):
+    legmap = load_robot("a3")
+    res = InterFootCalibrator().calibrate(legmap, load_session(sets["clean"], robot=legmap))
+    check = res.diagnostics["contact_check"]["stances"]
+    assert len(check) == 4 and not any(c["flagged"] for c in check)
+
+
+def test_bad_options_are_refused(tmp_path):
+    with pytest.raises(CalibrationError, match="contact_check"):
+        InterFootCalibrator(contact_check="maybe")
+    with pytest.raises(ConfigError, match="stance 'V' is not recorded"):
+        collect(CollectConfig(robot="a3", mode="weld", seed=0, effects=("shim:side=left,roll=0.3,stance=V",)),
+                tmp_path / "x", progress=False)
