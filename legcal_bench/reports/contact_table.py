@@ -9,7 +9,8 @@ Cases (weld unless named; `calibrated-imu` sensors, the paper's injection):
   contact      the contact floor, no effect: the soles really do sit off one plane there
                (they rock and sink under the load); the truth says by how much.
 Each set is calibrated with `interfoot` (operating setting) with `contact_check=flag`
-(the offsets of `off`) and `contact_check=drop`. Scored: the stances flagged against the
+(the offsets of `off`) and `contact_check=drop`; a set the robot does not hold
+(HoldError) is counted as failed. Scored: the stances flagged against the
 truth's own departure from one plane (the simulator's sole poses: a stance is truly off
 one plane when its mean relative tilt exceeds the check's size floor), the estimated
 departure against the true one, the offsets' RMS error with and without the drop.
@@ -56,6 +57,7 @@ def true_departures(paths) -> dict[str, np.ndarray]:
 def run_case(robot: str, case: str, seed: int) -> dict:
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
+    from legcal_bench.errors import HoldError
     from legcal_bench.estimation.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.protocol.collect import CollectConfig, collect
@@ -64,8 +66,12 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     legmap = load_robot(robot)
     mode, effects, stance, side = case_spec(case, seed)
     with tempfile.TemporaryDirectory(prefix="legcal_contact_") as work:
-        collect(CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed, effects=effects),
-                Path(work) / "set", progress=False)
+        try:
+            collect(CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed, effects=effects),
+                    Path(work) / "set", progress=False)
+        except HoldError as e:  # a set the robot cannot hold is a failed case, counted, not a crash
+            return {"robot": legmap.name, "robot_spec": robot, "case": case, "seed": seed, "mode": mode,
+                    "failed": str(e)}
         recs = load_session(Path(work) / "set", robot=legmap)
         paths = list_segments(Path(work) / "set")
         injected = np.asarray(load_truth(paths[0]).offsets)
@@ -104,7 +110,11 @@ def summarize(rows: list[dict]) -> list[dict]:
     out = []
     for robot in dict.fromkeys(r["robot"] for r in rows):
         for case in dict.fromkeys(r["case"] for r in rows if r["robot"] == robot):
-            rs = [r for r in rows if r["robot"] == robot and r["case"] == case]
+            rs = [r for r in rows if r["robot"] == robot and r["case"] == case and "failed" not in r]
+            failed = sum(1 for r in rows if r["robot"] == robot and r["case"] == case and "failed" in r)
+            if not rs:
+                out.append({"robot": robot, "case": case, "sets": 0, "failed": failed})
+                continue
             n_st = sum(len(r["stances"]) for r in rs)
             tp = sum(len(set(r["flagged"]) & set(r["truly_off"])) for r in rs)
             fp = sum(len(set(r["flagged"]) - set(r["truly_off"])) for r in rs)
@@ -114,7 +124,7 @@ def summarize(rows: list[dict]) -> list[dict]:
                      if s["recording"] == r["wedge_stance"] and s["flagged"]]
             flagged_st = [s for r in rs for s in r["stances"] if s["flagged"] and s["recording"] in r["truly_off"]]
             out.append({
-                "robot": robot, "case": case, "sets": len(rs), "stances": n_st, "truly_off": off,
+                "robot": robot, "case": case, "sets": len(rs), "failed": failed, "stances": n_st, "truly_off": off,
                 "flagged_truly_off": tp, "flagged_not_off": fp,
                 "wedge_sole_named": f"{sum(named)}/{len(wedge)}" if wedge else "–",
                 "median_tilt_error_deg": float(np.median([s["tilt_error_deg"] for s in flagged_st]))
@@ -141,9 +151,13 @@ def markdown(data: dict, made_by: str, code: str) -> str:
              "| median tilt error (deg) | median height error (mm) | offsets flag | offsets drop |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in data["summary"]:
+        if not s["sets"]:
+            lines.append(f"| {s['robot']} | {s['case']} | 0 ({s['failed']} not held) |" + " – |" * 9)
+            continue
+        sets = f"{s['sets']}" + (f" (+{s['failed']} not held)" if s["failed"] else "")
         te = "–" if s["median_tilt_error_deg"] is None else f"{s['median_tilt_error_deg']:.4f}"
         he = "–" if s["median_abs_height_error_mm"] is None else f"{s['median_abs_height_error_mm']:.3f}"
-        lines.append(f"| {s['robot']} | {s['case']} | {s['sets']} | {s['stances']} | {s['truly_off']} | "
+        lines.append(f"| {s['robot']} | {s['case']} | {sets} | {s['stances']} | {s['truly_off']} | "
                      f"{s['flagged_truly_off']} | {s['flagged_not_off']} | {s['wedge_sole_named']} | {te} | {he} | "
                      f"{s['offsets_rms_deg_flag']:.4f} | {s['offsets_rms_deg_drop']:.4f} |")
     return "\n".join(lines) + "\n"
