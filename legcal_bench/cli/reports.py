@@ -60,51 +60,47 @@ def cmd_regression(a: argparse.Namespace) -> int:
     return 1 if problems else 0
 
 
-def cmd_effects_table(a: argparse.Namespace) -> int:
-    from pathlib import Path
-
+def _case_table(a: argparse.Namespace, module, option: str, known, name: str, made_by: str) -> dict:
+    """A per-robot, per-case, per-seed report (`module.build` / `markdown`): the choices
+    in `--<option>` checked against `known`, written to `--out` as `name`.md/.json."""
     from legcal_bench.errors import ConfigError
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
-    from legcal_bench.reports.effects_table import EFFECTS, build, markdown, plot
 
-    unknown = sorted(set(a.effects) - set(EFFECTS))
+    chosen = getattr(a, option)
+    unknown = sorted(set(chosen) - set(known))
     if unknown:
-        raise ConfigError(f"--effects {unknown}: use library effects from {list(EFFECTS)}")
+        raise ConfigError(f"--{option} {unknown}: use {option} from {list(known)}")
     if a.seeds < 1:
         raise ConfigError(f"--seeds {a.seeds}: need at least 1")
+    code = code_version()
+    data = module.build(a.robots, chosen, a.seeds, a.workers, progress=not a.quiet)
+    data.update(made_by=made_by, code=code)
+    md = module.markdown(data, made_by, describe(code))
+    write_report(a.out, md, data, name=name)
+    print(md)
+    return data
+
+
+def cmd_effects_table(a: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from legcal_bench.reports import effects_table
+
     made_by = (f"legcal-bench effects-table --robots {' '.join(a.robots)} --effects {' '.join(a.effects)} "
                f"--seeds {a.seeds}")
-    code = code_version()
-    data = build(a.robots, a.effects, a.seeds, a.workers, progress=not a.quiet)
-    data.update(made_by=made_by, code=code)
-    md = markdown(data, made_by, describe(code))
-    write_report(a.out, md, data, name="effects_table")
-    plot(data, Path(a.out) / "effects_table.png")
-    print(md)
+    data = _case_table(a, effects_table, "effects", effects_table.EFFECTS, "effects_table", made_by)
+    effects_table.plot(data, Path(a.out) / "effects_table.png")
     print(f"wrote {a.out}/effects_table.md, .json, .png")
     return 0
 
 
 def cmd_contact_table(a: argparse.Namespace) -> int:
-    from legcal_bench.errors import ConfigError
-    from legcal_bench.files.reports import write_report
-    from legcal_bench.provenance import code_version, describe
-    from legcal_bench.reports.contact_table import CASES, build, markdown
+    from legcal_bench.reports import contact_table
 
-    unknown = sorted(set(a.cases) - set(CASES))
-    if unknown:
-        raise ConfigError(f"--cases {unknown}: use cases from {list(CASES)}")
-    if a.seeds < 1:
-        raise ConfigError(f"--seeds {a.seeds}: need at least 1")
     cases = " ".join(f"'{c}'" if " " in c else c for c in a.cases)
     made_by = f"legcal-bench contact-table --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
-    code = code_version()
-    data = build(a.robots, a.cases, a.seeds, a.workers, progress=not a.quiet)
-    data.update(made_by=made_by, code=code)
-    md = markdown(data, made_by, describe(code))
-    write_report(a.out, md, data, name="contact_table")
-    print(md)
+    _case_table(a, contact_table, "cases", contact_table.CASES, "contact_table", made_by)
     print(f"wrote {a.out}/contact_table.md, .json")
     return 0
 
@@ -145,29 +141,24 @@ def add_commands(sub) -> None:
     rc.add_argument("--quiet", action="store_true")
     rc.set_defaults(func=cmd_robots_check)
 
+    from legcal_bench.reports.contact_table import CASES
     from legcal_bench.reports.effects_table import EFFECTS
 
-    et = sub.add_parser("effects-table", help="model gap: for each library effect at a realistic size, the offsets-"
-                                              "only fit and the fit with the effect added, beside the clean floor")
-    et.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
-    et.add_argument("--effects", nargs="+", default=list(EFFECTS))
-    et.add_argument("--seeds", type=int, default=10)
-    et.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    et.add_argument("--out", default="reports/effects")
-    et.add_argument("--quiet", action="store_true")
-    et.set_defaults(func=cmd_effects_table)
-
-    from legcal_bench.reports.contact_table import CASES
-
-    ct = sub.add_parser("contact-table", help="the per-stance contact check measured: clean data, a wedge under one "
-                                              "sole in one stance, the contact floor (flags against the truth)")
-    ct.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
-    ct.add_argument("--cases", nargs="+", default=list(CASES))
-    ct.add_argument("--seeds", type=int, default=5)
-    ct.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    ct.add_argument("--out", default="reports/contact_check")
-    ct.add_argument("--quiet", action="store_true")
-    ct.set_defaults(func=cmd_contact_table)
+    for name, option, choices, seeds, out, func, text in (
+            ("effects-table", "effects", EFFECTS, 10, "reports/effects", cmd_effects_table,
+             "model gap: for each library effect at a realistic size, the offsets-only fit and the fit with the "
+             "effect added, beside the clean floor"),
+            ("contact-table", "cases", CASES, 5, "reports/contact_check", cmd_contact_table,
+             "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
+             "contact floor (flags against the truth)")):
+        t = sub.add_parser(name, help=text)
+        t.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
+        t.add_argument(f"--{option}", nargs="+", default=list(choices))
+        t.add_argument("--seeds", type=int, default=seeds)
+        t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
+        t.add_argument("--out", default=out)
+        t.add_argument("--quiet", action="store_true")
+        t.set_defaults(func=func)
 
     rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
     rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")
