@@ -259,6 +259,8 @@ class InterFootCalibrator(Calibrator):
             dq, hist2 = problem.solve(dq, self)
         else:
             hist2 = []
+        t_solve = time.perf_counter() - t1
+        t_contact = time.perf_counter()
         contacts, dropped = None, []
         if self.contact_check != "off":
             contacts = contact_check(self, prep, problem.segments, dq)
@@ -273,11 +275,13 @@ class InterFootCalibrator(Calibrator):
                 problem.build(kept)
                 dq, hist3 = problem.solve(dq, self)
                 hist2 += hist3
+                # A fit with effects starts from the same stances.
+                prep = replace(prep, segments=[s for s in prep.segments if s.recording not in dropped])
                 warnings.append(f"contact_check=drop: fitted without {', '.join(dropped)}")
             elif flagged:
                 warnings.append("contact_check: rerun with --option contact_check=drop to fit without "
                                 f"{', '.join(c.recording for c in flagged)}, or re-record on a flat floor")
-        t_solve = time.perf_counter() - t1
+        t_contact = time.perf_counter() - t_contact
 
         t2 = time.perf_counter()
         problem.means_at(dq)
@@ -327,7 +331,7 @@ class InterFootCalibrator(Calibrator):
                                                                 "dropped": dropped},
                 **({"effects": effects_report} if effects_report is not None else {}),
             },
-            timing_s={"preprocess": t_pre, "solve": t_solve, "observability": t_obs,
+            timing_s={"preprocess": t_pre, "solve": t_solve, "contact_check": t_contact, "observability": t_obs,
                       "total": time.perf_counter() - t0},
             settings=self.settings(),
             warnings=warnings,
@@ -682,12 +686,13 @@ def _stance_contacts(cal, prep, problem, dq, sig) -> list[StanceContact]:
     means = problem.means_at(dq)
     r, J = problem.evaluate(dq, "projected")
     owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
+    # The offsets' change without each stance: one Gauss-Newton step on the other rows.
+    delta = {n: -np.linalg.lstsq(J[owner != n], r[owner != n], rcond=None)[0] for n in names}
     items = []
     for i, s in enumerate(segs):
-        rest = owner != s.recording
-        delta = -np.linalg.lstsq(J[rest], r[rest], rcond=None)[0]
         m = fr.segment == i
-        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12], "delta": delta,
+        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12],
+                      "delta": delta[s.recording],
                       "cov": np.linalg.pinv(total - info[s.recording], hermitian=True),
                       "left_tilt": fr.r[m, 7:9].mean(axis=0)})
     return check_stances(items, sig["encoder"])

@@ -65,6 +65,8 @@ def test_the_wedged_stance_is_flagged_read_right_and_dropped(sets):
     dropped = InterFootCalibrator(contact_check="drop").calibrate(legmap, recs)
     assert dropped.diagnostics["contact_check"]["dropped"] == ["stance_II"]
     assert "stance_II" not in dropped.diagnostics["segments"]
+    with_effect = InterFootCalibrator(contact_check="drop", effects="imu_tilt").calibrate(legmap, recs)
+    assert with_effect.diagnostics["effects"]["frames_used"] == dropped.diagnostics["frames_used"]  # same stances
     injected = np.asarray(load_truth(list_segments(sets["wedge"])[0]).offsets)
 
     def err(r):
