@@ -2,8 +2,9 @@
 a ZMP reference, the CoM from ZMP preview control, swing-foot arcs, joint targets by
 closed-chain IK, and balance feedback on the IMU.
 
-The gait: from a standing squat (`GaitParams.depth` below straight legs), steps of
-`step_length` every `step_period`, the right foot first; each step begins with a double
+The gait: from a standing squat (`GaitParams.depth` below straight legs), the soles
+`width` further apart than at zero (each side), steps of `step_length` every
+`step_period`, the right foot first; each step begins with a double
 support share in which the ZMP shifts to the stance foot, then the swing foot travels
 on a cycloid (`lift` high). The CoM follows the ZMP through `zmp_preview.track` (height:
 the pelvis's), the pelvis is the CoM less its offset at the starting pose, and the
@@ -43,6 +44,7 @@ class GaitParams:
     end_s: float = 1.5  # standing after the last
     dt: float = 0.01  # s, the plan's (and the walker's control) period
     com_x_bias: float = 0.0  # m, the planned CoM ahead (+) or behind (-) of the ZMP reference
+    width: float = 0.0  # m added to each sole's lateral distance from the midline (a wider stance)
 
 
 @dataclass
@@ -56,7 +58,7 @@ class Gait:
 
 def plan_gait(kin: LegKinematics, n_steps: int, p: GaitParams = GaitParams()) -> Gait:
     """Footsteps and the ZMP reference for `n_steps` steps (the last one closes the feet)."""
-    y0, dt = kin.dims.foot_y, p.dt
+    y0, dt = kin.dims.foot_y + p.width, p.dt
     n = int(round((p.start_s + n_steps * p.step_period + p.end_s) / dt))
     t = np.arange(n) * dt
     feet = {"left": np.zeros((n, 3)), "right": np.zeros((n, 3))}

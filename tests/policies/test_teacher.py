@@ -76,3 +76,15 @@ def test_walk_runs_the_teacher_from_its_recipe(capsys):
     assert s["policy"] == "zmp_teacher" and s["upright"] and "--teacher" in s["made_by"]
     assert main(["walk", "--robot", "a3", "--seconds", "2"]) == 2
     assert "--policy SPEC" in capsys.readouterr().err
+
+
+def test_width_moves_the_soles_apart():
+    from legcal_bench.policies.zmp_walker import GaitParams, plan_gait
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    kin = LegKinematics(load_robot("a3"))
+    narrow, wide = (plan_gait(kin, 4, GaitParams(width=w)) for w in (0.0, 0.03))
+    assert np.allclose(wide.left[:, 1] - narrow.left[:, 1], 0.03)
+    assert np.allclose(wide.right[:, 1] - narrow.right[:, 1], -0.03)
+    assert np.allclose(wide.left[:, [0, 2]], narrow.left[:, [0, 2]])  # only the lateral placement changes
+    assert np.abs(wide.zmp[:, 1]).max() == pytest.approx(kin.dims.foot_y + 0.03)  # the ZMP reaches the stance sole
