@@ -522,10 +522,8 @@ def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: li
     if not effects:
         dq0 = np.asarray(dq0, dtype=float)
         return ModelFit((), model, dq0, dq0, (), None, trimmed)
-    white = _noise_weights(kin, prep.stances)
     x = np.r_[dq0, np.zeros(model.n - 12)]
-    confounds = confound_report(_whitened_jacobian(kin, segments, white, cal.bound, model, x, dq0), model,
-                                prep.robot.joint_names)
+    confounds = start_confounds(cal, prep, model, dq0, segments)
     held = tuple(model.names.index(h) for h in confounds["held"])
     q_ref = dq0
     for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
@@ -536,6 +534,19 @@ def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: li
             x, _ = problem.solve(x, cal)
         q_ref = x[:12]
     return ModelFit(tuple(effects), model, x, q_ref, tuple(confounds["held"]), confounds, problem.segments)
+
+
+def start_confounds(cal: InterFootCalibrator, prep: Prepared, model, dq0: np.ndarray,
+                    segments: list[_Prepared] | None = None) -> dict:
+    """The confound report of `model` (an `EffectModel`, or effect names) at the
+    offsets-only estimate `dq0`, effects at zero: what these data cannot separate, before
+    any fit with the effects."""
+    segments = prep.segments if segments is None else segments
+    if not hasattr(model, "slices"):
+        model = _effect_model(prep.kin, tuple(model), segments)
+    x = np.r_[np.asarray(dq0, dtype=float), np.zeros(model.n - 12)]
+    J = _whitened_jacobian(prep.kin, segments, _noise_weights(prep.kin, prep.stances), cal.bound, model, x, dq0)
+    return confound_report(J, model, prep.robot.joint_names)
 
 
 def fit_effects(cal: InterFootCalibrator, prep: Prepared, dq0: np.ndarray):

@@ -3,10 +3,15 @@ modelgap`).
 
 Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagnosed by
 `legcal_bench.evaluation.modelgap.diagnose` with `interfoot` (`sensor` setting):
-  clean         no effect: the false-alarm rate (an effect claimed, or "ambiguous");
+  clean         no effect: the false-alarm rate (an effect claimed, or "ambiguous"),
+                and how far the data are from the declared noise at the true offsets;
+  clean_kinematic  the same on the kinematic floor;
   library       each library effect at a magnitude drawn from the seed in a realistic
                 range (`library_spec`), side and target alternating: detected,
                 attributed to the right effect, offsets error before/after;
+  near          each library effect at a small fraction of its draw (NEAR_SCALES): the
+                near-threshold band, scored over the seeds whose offsets-only z is in NEAR_Z;
+  multi         several small effects at once (MULTI_COUNT of them at MULTI_SCALE);
   outside       physical edits no library effect describes (`OUTSIDE`): "unexplained"
                 (or a poor fit) with the edited leg located, never a confident wrong
                 attribution; the channel is compared with a reference run of the same
@@ -20,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.evaluation.modelgap import ALPHA
+
 LIBRARY = ("imu_tilt", "leg_length", "encoder_scale", "compliance", "hip_axis")
 OUTSIDE = {
     "shank_bent": "link_offset:link={side}_shank,axis=y,mm={size}",
@@ -28,26 +35,51 @@ OUTSIDE = {
 }
 OUTSIDE_SIZE = {"shank_bent": 3.0, "shank_twisted": 1.0, "knee_axis_tilted": 0.5}
 REFERENCE_SCALE = 4.0
+NEAR_SCALES = (0.05, 0.5)  # the near-threshold band: this fraction of a realistic draw (log-uniform)
+NEAR_Z = (2.0, 10.0)  # ... scored over the seeds whose offsets-only post-fit z falls here
+MULTI_COUNT, MULTI_SCALE = 3, 0.25  # several small effects at once: 3 library effects, each at a quarter of its draw
 OUTSIDE_ROBOTS = ("a3",)  # the outside edits run on these of the suite's robots (time: ~35 s a diagnosis)
 SIDES = ("left", "right")
 
 
-def library_spec(effect: str, seed: int) -> str:
-    """A library effect at a magnitude drawn in its realistic range (seeded)."""
+def library_spec(effect: str, seed: int, scale: float = 1.0) -> str:
+    """A library effect at a magnitude drawn in its realistic range (seeded), times
+    `scale` (compliance: its deflection, so the stiffness divided by `scale`)."""
     rng = np.random.default_rng([seed, 17])
     side = SIDES[seed % 2]
     sign = 1.0 if rng.random() < 0.5 else -1.0
     if effect == "imu_tilt":
-        return f"imu_tilt:roll={sign * rng.uniform(0.3, 0.7):.3f}"
+        return f"imu_tilt:roll={scale * sign * rng.uniform(0.3, 0.7):.4f}"
     if effect == "leg_length":
-        return f"link_length:link={side}_{('shank', 'thigh')[(seed // 2) % 2]},mm={sign * rng.uniform(1.5, 3.0):.2f}"
+        mm = scale * sign * rng.uniform(1.5, 3.0)
+        return f"link_length:link={side}_{('shank', 'thigh')[(seed // 2) % 2]},mm={mm:.4f}"
     if effect == "encoder_scale":
-        return f"encoder_scale:joint={side}_knee,scale={sign * rng.uniform(0.003, 0.007):.4f}"
+        return f"encoder_scale:joint={side}_knee,scale={scale * sign * rng.uniform(0.003, 0.007):.6f}"
     if effect == "compliance":
-        return f"compliance:joint={side}_knee,k={rng.uniform(0.7e4, 1.5e4):.0f}"
+        return f"compliance:joint={side}_knee,k={rng.uniform(0.7e4, 1.5e4) / scale:.0f}"
     if effect == "hip_axis":
-        return f"hip_axis:joint={side}_hip_pitch,about=z,deg={sign * rng.uniform(0.3, 0.7):.3f}"
+        return f"hip_axis:joint={side}_hip_pitch,about=z,deg={scale * sign * rng.uniform(0.3, 0.7):.4f}"
     raise KeyError(effect)
+
+
+def near_scale(seed: int) -> float:
+    """The near-threshold band's size, a fraction of the realistic draw: log-uniform in
+    NEAR_SCALES (seeded). The offsets-only z grows with the size squared; realistic draws
+    give z ~ 15-460 on the A3-like robot (commit 49f9cd0's suite), so the band straddles
+    z = 2-10 for every library effect; the score counts the seeds that land there."""
+    lo, hi = NEAR_SCALES
+    return float(np.exp(np.random.default_rng([seed, 71]).uniform(np.log(lo), np.log(hi))))
+
+
+def multi_effects(seed: int) -> tuple[str, ...]:
+    """Several small effects at once: MULTI_COUNT library effects (seeded choice)."""
+    pick = np.random.default_rng([seed, 23]).choice(len(LIBRARY), MULTI_COUNT, replace=False)
+    return tuple(LIBRARY[i] for i in sorted(pick))
+
+
+def multi_specs(seed: int) -> tuple[str, ...]:
+    """... each at MULTI_SCALE of its realistic draw."""
+    return tuple(library_spec(e, seed, MULTI_SCALE) for e in multi_effects(seed))
 
 
 def outside_spec(name: str, seed: int, scale: float = 1.0) -> tuple[str, str]:
@@ -55,34 +87,43 @@ def outside_spec(name: str, seed: int, scale: float = 1.0) -> tuple[str, str]:
     return OUTSIDE[name].format(side=side, size=OUTSIDE_SIZE[name] * scale), side
 
 
-def _collect(robot: str, spec: str | None, seed: int, work: Path):
+def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: str = "weld"):
     from legcal_bench.data.recording import list_segments, load_session, load_truth
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
 
     legmap = load_robot(robot)
-    cfg = CollectConfig(robot=robot, mode="weld", sensors="calibrated-imu", seed=seed,
-                        effects=() if spec is None else (spec,))
+    cfg = CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed,
+                        effects=tuple(specs))
     collect(cfg, work / "set", progress=False)
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 
 
 def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
-    """One diagnosed session set; `kind` clean | library | outside | reference."""
+    """One diagnosed session set; `kind` clean | library | near | multi | outside |
+    reference."""
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
 
-    spec, side = None, None
+    specs, side, scale = (), None, None
     if kind == "library":
-        spec = library_spec(name, seed)
+        specs = (library_spec(name, seed),)
+    elif kind == "near":
+        scale = near_scale(seed)
+        specs = (library_spec(name, seed, scale),)
+    elif kind == "multi":
+        specs = multi_specs(seed)
+        name = "+".join(multi_effects(seed))
     elif kind in ("outside", "reference"):
         spec, side = outside_spec(name, seed, REFERENCE_SCALE if kind == "reference" else 1.0)
+        specs = (spec,)
     cal = get_calibrator("interfoot", setting="sensor")
     with tempfile.TemporaryDirectory(prefix="legcal_modelgap_") as work:
-        legmap, recs, truth = _collect(robot, spec, seed, Path(work))
-        row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name, "spec": spec, "seed": seed,
-               "side": side}
+        mode = "kinematic" if kind == "clean_kinematic" else "weld"
+        legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode)
+        row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name,
+               "spec": " ".join(specs) or None, "seed": seed, "side": side, "scale": scale, "mode": mode}
         if kind == "reference":
             from legcal_bench.calibrators.interfoot import fit_model
 
@@ -91,6 +132,8 @@ def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
             row["localization"] = trace(ctx, ev)["localization"]
             return row
         rep = diagnose(cal, legmap, recs)
+        if kind.startswith("clean"):
+            row["at_truth"] = _chi2_at_truth(cal, legmap, recs, truth)
     injected = np.asarray(truth.offsets)
     names = legmap.joint_names
     before = np.array([rep["offsets_only_rad"][n] for n in names])
@@ -98,6 +141,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
     row.update(verdict=rep["verdict"], selected=rep["selected"], poor_fit=rep["poor_fit"],
                ambiguous=[a["effect"] for a in rep["ambiguous"]], summary=rep["summary"],
                chi2_per_dof=rep["detection"]["chi2_per_dof"], p_value=rep["detection"]["p_value"],
+               z=rep["detection"]["z"], heldout=rep["detection"].get("heldout"),
                chi2_per_dof_after=rep["after"]["chi2_per_dof"],
                localization=rep["tracing"]["localization"],
                offsets_rms_deg={"before": float(np.rad2deg(rms(before - injected))),
@@ -106,23 +150,45 @@ def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
     return row
 
 
+def _chi2_at_truth(cal, legmap, recs, truth) -> dict:
+    """Whitened chi-square per degree of freedom with the offsets at the injected truth
+    (no step): what the data hold beyond the declared noise that no estimate causes."""
+    from legcal_bench.calibrators.interfoot import fit_model
+    from legcal_bench.evaluation.modelgap import context, evaluate
+
+    ctx = context(cal, legmap, recs)
+    fit = fit_model(cal, ctx.prep)
+    fit.x[:12] = np.asarray(truth.offsets)
+    out = {}
+    for key, segs in (("training", ctx.prep.segments), ("heldout", ctx.heldout)):
+        if segs:
+            ev = evaluate(ctx, fit, segs)
+            dof = ev.n_rows - 6 * len({s.name for s in segs})
+            out[key] = float(ev.z @ ev.z) / dof
+    return out
+
+
 def _case(args):
     return run_case(*args)
 
 
-def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int) -> list[tuple]:
-    out = [(r, "clean", None, s) for r in robots for s in range(clean_seeds)]
+def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int, near_seeds: int = 0,
+         multi_seeds: int = 0) -> list[tuple]:
+    out = [(r, kind, None, s) for r in robots for kind in ("clean", "clean_kinematic") for s in range(clean_seeds)]
     out += [(r, "library", e, s) for r in robots for e in LIBRARY for s in range(seeds)]
+    out += [(r, "near", e, 1000 + s) for r in robots for e in LIBRARY for s in range(near_seeds)]
+    out += [(r, "multi", None, 2000 + s) for r in robots for s in range(multi_seeds)]
     out += [(r, "reference", o, s) for r in outside_robots for o in OUTSIDE for s in range(2)]
     out += [(r, "outside", o, s) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
     return out
 
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_ROBOTS, outside_seeds: int = 10,
-        workers: int = 2, progress: bool = True) -> dict:
+        near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True) -> dict:
     from legcal_bench.files.parallel import map_with_progress
 
-    todo = jobs(robots, seeds, clean_seeds, [r for r in outside_robots if r in robots], outside_seeds)
+    todo = jobs(robots, seeds, clean_seeds, [r for r in outside_robots if r in robots], outside_seeds, near_seeds,
+                multi_seeds)
     rows = map_with_progress(_case, todo, workers, "modelgap", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
@@ -134,10 +200,10 @@ def summarize(rows: list[dict]) -> list[dict]:
         rr = [r for r in rows if r["robot"] == robot]
         clean = [r for r in rr if r["kind"] == "clean"]
         floor = float(np.mean([r["offsets_rms_deg"]["after"] for r in clean])) if clean else float("nan")
-        if clean:
-            out.append({"robot": robot, "case": "clean", "seeds": len(clean),
-                        "no_effect_claimed": sum(not r["selected"] and not r["ambiguous"] for r in clean),
-                        "verdicts": _count(r["verdict"] for r in clean), "floor_offsets_rms_deg": floor})
+        for case in ("clean", "clean_kinematic"):
+            clean_rows = [r for r in rr if r["kind"] == case]
+            if clean_rows:
+                out.append(_clean_summary(robot, case, clean_rows))
         for e in LIBRARY:
             rs = [r for r in rr if r["kind"] == "library" and r["name"] == e]
             if not rs:
@@ -153,6 +219,32 @@ def summarize(rows: list[dict]) -> list[dict]:
                         "offsets_rms_deg_after": after, "floor_offsets_rms_deg": floor,
                         "after_over_floor": after / floor if floor == floor else None,
                         "partly_confounded": conf})
+        for e in LIBRARY:
+            rs = [r for r in rr if r["kind"] == "near" and r["name"] == e]
+            if not rs:
+                continue
+            band = [r for r in rs if NEAR_Z[0] <= r["z"] <= NEAR_Z[1]]
+            out.append({"robot": robot, "case": f"near: {e}", "seeds": len(rs), "in_band": len(band),
+                        "scales": [min(r["scale"] for r in rs), max(r["scale"] for r in rs)],
+                        "z_range": [min(r["z"] for r in rs), max(r["z"] for r in rs)],
+                        "detected_in_band": sum(r["verdict"] != "explained" for r in band),
+                        "correct_in_band": sum(r["selected"] == [e] for r in band),
+                        "detected": sum(r["verdict"] != "explained" for r in rs),
+                        "correct": sum(r["selected"] == [e] for r in rs),
+                        "wrong_confident": sum(bool(r["selected"]) and r["selected"] != [e] for r in rs),
+                        "verdicts": _count(r["verdict"] for r in rs)})
+        multi = [r for r in rr if r["kind"] == "multi"]
+        if multi:
+            inj = [set(r["name"].split("+")) for r in multi]
+            out.append({"robot": robot, "case": f"multi: {MULTI_COUNT} effects at {MULTI_SCALE:g} of their size",
+                        "seeds": len(multi), "detected": sum(r["verdict"] != "explained" for r in multi),
+                        "effects_injected": MULTI_COUNT * len(multi),
+                        "effects_selected_right": sum(len(set(r["selected"]) & i) for r, i in zip(multi, inj)),
+                        "wrong_confident": sum(bool(set(r["selected"]) - i) for r, i in zip(multi, inj)),
+                        "verdicts": _count(r["verdict"] for r in multi),
+                        "offsets_rms_deg_before": float(np.mean([r["offsets_rms_deg"]["before"] for r in multi])),
+                        "offsets_rms_deg_after": float(np.mean([r["offsets_rms_deg"]["after"] for r in multi])),
+                        "floor_offsets_rms_deg": floor})
         refs = {(r["name"], r["side"]): r["localization"] for r in rr if r["kind"] == "reference"}
         for o in OUTSIDE:
             rs = [r for r in rr if r["kind"] == "outside" and r["name"] == o]
@@ -172,6 +264,22 @@ def summarize(rows: list[dict]) -> list[dict]:
     return out
 
 
+def _clean_summary(robot: str, case: str, clean: list[dict]) -> dict:
+    truth_chi2 = {k: [r["at_truth"][k] for r in clean if k in r.get("at_truth", {})] for k in ("training", "heldout")}
+    return {"robot": robot, "case": case, "seeds": len(clean),
+            "no_effect_claimed": sum(not r["selected"] and not r["ambiguous"] for r in clean),
+            "detected": sum(r["verdict"] != "explained" for r in clean),
+            "training_test_fired": sum(r["p_value"] < ALPHA / 2 for r in clean),
+            "heldout_test_fired": sum((r.get("heldout") or {}).get("p_value", 1.0) < ALPHA / 2 for r in clean),
+            "chi2_per_dof_at_truth": {k: _mean_max(v) for k, v in truth_chi2.items() if v},
+            "verdicts": _count(r["verdict"] for r in clean),
+            "floor_offsets_rms_deg": float(np.mean([r["offsets_rms_deg"]["after"] for r in clean]))}
+
+
+def _mean_max(v) -> dict:
+    return {"mean": float(np.mean(v)), "max": float(np.max(v))}
+
+
 def _count(values) -> dict:
     out: dict = {}
     for v in values:
@@ -181,16 +289,30 @@ def _count(values) -> dict:
 
 def markdown(data: dict, made_by: str, code: str) -> str:
     L = ["# Model-gap loop: detection, attribution, \"unexplained\"", "",
-         f"Made by `{made_by}` ({code}). Weld, `calibrated-imu`, the paper's injection; `interfoot` (`sensor`) "
+         f"Made by `{made_by}` ({code}). Weld (clean_kinematic: the kinematic floor), `calibrated-imu`, the paper's "
+         "injection; `interfoot` (`sensor`) "
          "then `legcal_bench.evaluation.modelgap.diagnose`. Library magnitudes drawn per seed in realistic ranges "
          "(`library_spec`); offsets: RMS error of the 12 offsets (deg), offsets-only vs after the diagnosis.", "",
          "| robot | case | seeds | detected | correct / no effect claimed | wrong confident | offsets before | after "
          "| floor | after/floor | verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in data["summary"]:
         v = ", ".join(f"{k} {n}" for k, n in s["verdicts"].items())
-        if s["case"] == "clean":
-            L.append(f"| {s['robot']} | clean | {s['seeds']} | – | {s['no_effect_claimed']}/{s['seeds']} | – | – | "
+        if s["case"].startswith("clean"):
+            L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']} (training test {s['training_test_fired']}"
+                     f", held-out {s['heldout_test_fired']}) | {s['no_effect_claimed']}/{s['seeds']} | – | – | "
                      f"{s['floor_offsets_rms_deg']:.4f} | – | – | {v} |")
+        elif s["case"].startswith("near"):
+            L.append(f"| {s['robot']} | {s['case']} ({s['scales'][0]:.2f}–{s['scales'][1]:.2f} of the size; z "
+                     f"{s['z_range'][0]:.1f}–{s['z_range'][1]:.1f}) | {s['seeds']} ({s['in_band']} with z in "
+                     f"{NEAR_Z[0]:g}–{NEAR_Z[1]:g}) | {s['detected']}/{s['seeds']} (band {s['detected_in_band']}/"
+                     f"{s['in_band']}) | {s['correct']}/{s['seeds']} (band {s['correct_in_band']}/{s['in_band']}) | "
+                     f"{s['wrong_confident']} | – | – | – | – | {v} |")
+        elif s["case"].startswith("multi"):
+            L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']}/{s['seeds']} | "
+                     f"{s['effects_selected_right']}/{s['effects_injected']} injected effects selected | "
+                     f"{s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | {s['offsets_rms_deg_after']:.4f} | "
+                     f"{s['floor_offsets_rms_deg']:.4f} | "
+                     f"{s['offsets_rms_deg_after'] / s['floor_offsets_rms_deg']:.2f} | {v} |")
         elif s["case"].startswith("outside"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['unexplained']} unexplained | "
                      f"{s['unexplained_leg_and_channel']}/{s['seeds']} with leg and channel (leg {s['leg_correct']}, "

@@ -186,7 +186,8 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     made_by = f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
     code = code_version()
     t0 = time.perf_counter()
-    data = run(robots, seeds=seeds, clean_seeds=2 * seeds, outside_seeds=seeds, workers=a.workers,
+    data = run(robots, seeds=seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds, multi_seeds=seeds,
+               workers=a.workers,
                progress=not a.quiet)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))

@@ -7,11 +7,13 @@ Detection. The declared noise model, carried to each frame's residual
 the whitened chi-square is chi2(dof), dof = sum of the frames' ranks - 6 per segment
 (the inter-foot means) - the free parameters. Each fit's chi-square is taken after one
 Gauss-Newton step of the whitened problem from that fit (the calibrator weighs rows by
-a diagonal approximation of the same noise; the step makes models comparable). Tests:
-the training chi-square, and the held-out sessions' at the training estimate (the gap
-between them), each at ALPHA / 2.
+a diagonal approximation of the same noise; the step makes models comparable). Tests,
+each at ALPHA / 2: the training chi-square against chi2(dof), and the gap between the
+held-out sessions' chi-square per dof (at the training estimate) and the training's,
+against F (`_gap`).
 
-Selection, greedy and nested (at most MAX_EFFECTS): each library effect is fitted on
+Selection, run only when a detection test fires, greedy and nested (at most
+MAX_EFFECTS): each library effect is fitted on
 top of the current model (`fit_model`, confounded parameters held); it is kept only if
   1. its chi-square drop beats the BIC penalty, delta_chi2 > k ln(n_rows);
   2. leave-one-stance-out cross-validation agrees: the held-out stances' chi-square,
@@ -34,6 +36,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
+from scipy.stats import f as f_dist
 
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.effects import joint_loads, load_effects, registry
@@ -123,6 +126,18 @@ def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, 
     return float(z @ z), int(ev.n_rows - 6 * n_seg)
 
 
+def _gap(c: float, d: int, train: Evaluated) -> dict:
+    """The gap between the held-out sessions' residual (chi-square c, d dof, at the
+    training estimate) and the training residual: F = (c/d) / (chi2/dof of training),
+    F(d, dof) if both hold the same noise; p_value is its upper tail. Testing the gap,
+    not the held-out residual against the declared noise alone, keeps an error common to
+    every session (which the training test already judges) from counting twice."""
+    ratio = (c / d) / (train.chi2 / train.dof)
+    return {"chi2": c, "dof": d, "chi2_per_dof": c / d, "ratio_to_training": ratio,
+            "p_value": float(f_dist.sf(ratio, d, train.dof)),
+            "p_value_vs_declared_noise": float(chi2_dist.sf(c, d))}
+
+
 def context(cal, robot, recordings) -> Context:
     prep = cal.prepare(robot, recordings)
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
@@ -174,11 +189,11 @@ def candidates(ctx: Context, names=None) -> tuple[list[str], list[str]]:
     return ok, notes
 
 
-def _confound_entries(fit) -> list[dict]:
+def _confound_entries(confounds: dict | None) -> list[dict]:
     out = []
-    if not fit.confounds:
+    if not confounds:
         return out
-    for name, e in fit.confounds["effects"].items():
+    for name, e in confounds["effects"].items():
         if e["confounded_with_offsets"]:
             eff = load_effects([name])[0]
             out.append({"effect": name, "direction": e["closest_direction"], "offsets": e["mimics_offsets"],
@@ -190,7 +205,7 @@ def _confound_entries(fit) -> list[dict]:
 
 def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
     """The whole loop on one set of recordings; a JSON-ready report (radians, SI)."""
-    from legcal_bench.calibrators.interfoot import fit_model
+    from legcal_bench.calibrators.interfoot import fit_model, start_confounds
 
     say = progress or (lambda msg: None)
     ctx = context(cal, robot, recordings)
@@ -203,23 +218,28 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
     detection = {"chi2": base.chi2, "dof": base.dof, "chi2_per_dof": base.chi2 / base.dof,
                  "z": (base.chi2 - base.dof) / np.sqrt(2 * base.dof), "p_value": base.p_value}
     if ctx.heldout:
-        c, d = heldout_chi2(ctx, base_fit, base, ctx.heldout)
-        detection["heldout"] = {"chi2": c, "dof": d, "chi2_per_dof": c / d, "p_value": float(chi2_dist.sf(c, d)),
-                                "ratio_to_training": (c / d) / (base.chi2 / base.dof)}
+        detection["heldout"] = _gap(*heldout_chi2(ctx, base_fit, base, ctx.heldout), base)
     tried, notes = candidates(ctx, effects)
     steps, selected, ambiguous, confounded = [], [], [], {}
     current, current_fit = base, base_fit
     base_folds = None
     cv_current = None
-    while len(selected) < MAX_EFFECTS:
+    # Selection only once detection finds a residual the offsets do not explain: an
+    # effect is not added to data the offsets-only model already fits within the noise.
+    significant = detection["p_value"] < ALPHA / 2 or detection.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    if not significant:
+        notes.append("selection not run: the offsets-only model explains these data within the declared noise")
+    # What these data cannot separate, per candidate, whether or not selection runs.
+    for name in tried:
+        for c in _confound_entries(start_confounds(cal, ctx.prep, (name,), base_fit.x[:12])):
+            confounded.setdefault(c["effect"], c)
+    while significant and len(selected) < MAX_EFFECTS:
         rows = []
         for name in tried:
             if name in selected:
                 continue
             say(f"fit + {name}")
             fit = fit_model(cal, ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
-            for c in _confound_entries(fit):
-                confounded.setdefault(c["effect"], c)
             ev = evaluate(ctx, fit, ctx.prep.segments)
             k = ev.k - current.k
             d = current.chi2 - ev.chi2
@@ -261,9 +281,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
     after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
              "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
     if ctx.heldout:
-        c, d = heldout_chi2(ctx, current_fit, final, ctx.heldout)
-        after["heldout"] = {"chi2": c, "dof": d, "chi2_per_dof": c / d, "p_value": float(chi2_dist.sf(c, d))}
-    significant = detection["p_value"] < ALPHA / 2 or detection.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+        after["heldout"] = _gap(*heldout_chi2(ctx, current_fit, final, ctx.heldout), final)
     residual_left = after["p_value"] < ALPHA / 2 or after.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
     excess = max(base.chi2 - base.dof, 1e-12)
     after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess

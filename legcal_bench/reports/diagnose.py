@@ -39,8 +39,10 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None) -> str:
          f"| chi2 / dof (training) | {d['chi2_per_dof']:.4f} (p = {d['p_value']:.2g}) | "
          f"{a['chi2_per_dof']:.4f} (p = {a['p_value']:.2g}) |"]
     if "heldout" in d:
-        L.append(f"| chi2 / dof (held-out sessions) | {d['heldout']['chi2_per_dof']:.4f} | "
-                 f"{a['heldout']['chi2_per_dof']:.4f} |")
+        h, ha = d["heldout"], a["heldout"]
+        L.append(f"| chi2 / dof (held-out sessions) | {h['chi2_per_dof']:.4f} | {ha['chi2_per_dof']:.4f} |")
+        L.append(f"| held-out / training (the gap) | {h['ratio_to_training']:.4f} (p = {h['p_value']:.2g}) | "
+                 f"{ha['ratio_to_training']:.4f} (p = {ha['p_value']:.2g}) |")
     if truth:
         L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {truth['after']:.4f} |")
     L += ["", f"Decision rules: {report['rules']}; detection at alpha = {report['alpha']}.", ""]

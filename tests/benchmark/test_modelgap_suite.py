@@ -1,0 +1,45 @@
+"""The model-gap suite's cases (issue #17): the near-threshold band and the several-
+effects case draw valid, seeded specs; the summary scores a selection of an effect that
+was not injected as a confident wrong attribution."""
+
+import pytest
+
+from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, library_spec, multi_effects,
+                                             multi_specs, near_scale, summarize)
+from legcal_bench.sim.effects import parse_effect
+
+
+def test_cases_draw_valid_seeded_specs():
+    for seed in range(12):
+        s = near_scale(seed)
+        assert NEAR_SCALES[0] <= s <= NEAR_SCALES[1] and s == near_scale(seed)
+        picked = multi_effects(seed)
+        assert len(set(picked)) == MULTI_COUNT and set(picked) <= set(LIBRARY)
+        for spec in multi_specs(seed) + tuple(library_spec(e, seed, s) for e in LIBRARY):
+            parse_effect(spec)  # raises on a malformed spec
+    # The scale multiplies the size (compliance: divides the stiffness).
+    full, tenth = library_spec("imu_tilt", 4), library_spec("imu_tilt", 4, 0.1)
+    assert float(tenth.split("=")[1]) == pytest.approx(0.1 * float(full.split("=")[1]), rel=1e-3)
+    k_full = float(library_spec("compliance", 4).split("k=")[1])
+    assert float(library_spec("compliance", 4, 0.5).split("k=")[1]) == pytest.approx(2 * k_full, abs=1)
+
+
+def _row(kind, name, selected, verdict="selected", seed=0, **kw):
+    return {"robot": "r", "kind": kind, "name": name, "selected": selected, "ambiguous": [], "verdict": verdict,
+            "seed": seed, "p_value": 0.5, "z": kw.pop("z", 0.0), "scale": kw.pop("scale", None),
+            "offsets_rms_deg": {"before": 0.1, "after": 0.02}, "confounded": [], **kw}
+
+
+def test_summary_scores_the_several_effects_and_near_cases():
+    rows = [_row("clean", None, [], "explained", at_truth={"training": 1.0}),
+            _row("multi", "imu_tilt+leg_length+hip_axis", ["imu_tilt", "leg_length"]),
+            _row("multi", "imu_tilt+leg_length+hip_axis", ["compliance"], seed=1),
+            _row("near", "imu_tilt", ["imu_tilt"], z=5.0, scale=0.1),
+            _row("near", "imu_tilt", [], "explained", z=1.0, scale=0.03),
+            _row("near", "imu_tilt", ["leg_length"], z=12.0, scale=0.2)]
+    by = {s["case"]: s for s in summarize(rows)}
+    multi = next(v for k, v in by.items() if k.startswith("multi"))
+    assert (multi["effects_selected_right"], multi["wrong_confident"], multi["effects_injected"]) == (2, 1, 6)
+    near = by["near: imu_tilt"]
+    assert (near["in_band"], near["correct_in_band"], near["correct"], near["wrong_confident"]) == (1, 1, 1, 1)
+    assert by["clean"]["detected"] == 0 and by["clean"]["chi2_per_dof_at_truth"]["training"]["mean"] == 1.0
