@@ -284,12 +284,12 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     from legcal_bench.evaluation.modelgap import diagnose
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
-    from legcal_bench.reports.diagnose import json_ready, markdown, plot, truth_scores
+    from legcal_bench.reports.diagnose import (diagnosis_walks, heldout_scores, json_ready, markdown, plot,
+                                               truth_scores, walks_line)
     from legcal_bench.robots import load_robot
 
-    if a.walk:
-        raise ConfigError("--walk: the closed-loop before/after of a diagnosis is not built yet; run walk-eval on "
-                          "the two offset sets in the report (offsets_only_rad, offsets_rad)")
+    if a.walk_trials < 1:
+        raise ConfigError(f"--walk-trials {a.walk_trials}: give at least 1")
     options = {"setting": "sensor"}
     if a.result:
         try:
@@ -305,20 +305,34 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     cal = get_calibrator("interfoot", **options)
     writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
+    if a.walk:
+        from legcal_bench.policies.runner import PolicyRunner
+
+        PolicyRunner(a.walk, legmap)  # a bad spec fails here, before the diagnosis
     recordings = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
     effects = a.effects or None
     report = diagnose(cal, legmap, recordings, effects=effects,
                       progress=None if a.quiet else (lambda m: print(f"  diagnose: {m}", flush=True)))
     truth = truth_scores(report, Path(a.bags), legmap.joint_names)
-    made_by = f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}" + (f" --result {a.result}" if a.result else "")
+    report["heldout_foot_height_mm"] = heldout_scores(report, legmap, Path(a.bags))
+    made_by = (f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}" + (f" --result {a.result}" if a.result else "")
+               + (f" --walk {a.walk} --walk-trials {a.walk_trials}" if a.walk else ""))
+    walks = None
+    if a.walk:
+        walks = diagnosis_walks(report, legmap, Path(a.bags), a.walk, a.walk_trials, progress=not a.quiet)
     code = code_version()
-    data = {**json_ready(report), "truth": truth, "made_by": made_by, "code": code}
-    md = markdown(report, made_by, describe(code), truth)
+    data = {**json_ready(report), "truth": truth, "walks": walks, "made_by": made_by, "code": code}
+    md = markdown(report, made_by, describe(code), truth, walks)
     write_report(a.out, md, data, name="diagnosis")
     plot(report, Path(a.out) / "trace.png")
     print(report["summary"])
     if truth:
         print(f"offsets RMS error vs truth: {truth['before']:.4f} deg -> {truth['after']:.4f} deg")
+    hh = report["heldout_foot_height_mm"]
+    if hh:
+        print(f"held-out foot height RMS ({hh['postures']} postures): {hh['before']:.4f} mm -> {hh['after']:.4f} mm")
+    if walks:
+        print(walks_line(walks))
     print(f"wrote {a.out}/diagnosis.md, .json, trace.png")
     return 0
 
@@ -332,7 +346,11 @@ def add_commands(sub) -> None:
     dg.add_argument("--result", default=None, help="a calibrate result JSON (interfoot): its setting is reused")
     dg.add_argument("--effects", nargs="+", default=None, help="candidate library effects (default: all registered)")
     dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png")
-    dg.add_argument("--walk", action="store_true", help="closed-loop before/after (not built yet: errors)")
+    dg.add_argument("--walk", default=None, metavar="POLICY",
+                    help="closed loop before/after: walk this policy (a built-in walker name or a spec YAML) with the "
+                         "true offsets (the recordings' ground truth; for real logs, the diagnosis's final estimate) "
+                         "corrected by the offsets-only estimate and by the estimate after the diagnosis")
+    dg.add_argument("--walk-trials", type=int, default=5, help="seeds of the --walk comparison (default 5)")
     dg.add_argument("--quiet", action="store_true")
     dg.set_defaults(func=cmd_diagnose)
 

@@ -224,3 +224,44 @@ def evaluate(cfg: ClosedLoopConfig, executor=None, progress: bool = True) -> tup
     bar.close()
     trials.sort(key=lambda t: t["seed"])
     return summarize(cfg, trials), trials
+
+
+def estimate_walks(robot, policy: str, true_dq: np.ndarray, estimates: dict, trials: int = 5,
+                   seconds: float = 20.0, sensors: str = "realistic", progress: bool = True) -> dict:
+    """What the choice between estimates does to a walk: per seed, the nominal walk (no
+    offsets), the walk with `true_dq` uncorrected, and one walk per estimate (label ->
+    12 radians) with `true_dq` on the robot corrected by it, the same seed driving noise
+    and jitter; deviations from the seed's nominal walk (mm), mean +- std over the trials
+    where both stayed upright, and the nominal seed-to-seed spread (the noise floor).
+    The walking model is the nominal one: the walk isolates the offsets' share of the
+    answer, not the effect itself."""
+    from tqdm import tqdm
+
+    from legcal_bench.envs.walking import WalkingEnv
+    from legcal_bench.policies.runner import PolicyRunner
+
+    env = WalkingEnv(robot=robot, policy=policy, sensors=sensors)
+    runner = PolicyRunner(env.policy_spec, robot)
+    conds = {"uncorrected": None, **estimates}
+    rows = {c: [] for c in conds}
+    spread, upright = [], {c: 0 for c in ("nominal", *conds)}
+    for seed in tqdm(range(trials), desc="walks", unit="trial", disable=not progress):
+        nominal = walk(env, runner, seconds, seed, {"offsets": np.zeros(12), "correction": None})
+        upright["nominal"] += nominal.upright
+        s = walk(env, runner, seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
+        if s.upright and nominal.upright:
+            spread.append(deviation(s, nominal))
+        for c, est in conds.items():
+            w = walk(env, runner, seconds, seed, {"offsets": true_dq, "correction": None if est is None else est})
+            upright[c] += w.upright
+            if w.upright and nominal.upright:
+                rows[c].append(deviation(w, nominal))
+    keys = ("pelvis_rms_mm", "foot_strike_rms_mm")
+    out = {"trials": trials, "seconds": seconds, "upright": upright,
+           "nominal_spread": {k: mean_std([d[k] for d in spread]) for k in keys}}
+    for c, rs in rows.items():
+        out[c] = {k: mean_std([d[k] for d in rs]) for k in keys}
+        out[c]["paired"] = len(rs)
+        if c in estimates:
+            out[c]["estimate_rms_error_deg"] = float(np.degrees(rms(np.asarray(estimates[c]) - true_dq)))
+    return out

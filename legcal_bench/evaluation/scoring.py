@@ -157,3 +157,41 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
             out["heldout"]["sole_normal_rms_true_deg"] = {"before": float(np.rad2deg(rms(cat(nt0)))),
                                                           "after": float(np.rad2deg(rms(cat(nt1))))}
     return out
+
+
+def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | None:
+    """Held-out foot height RMS (mm) per estimate (label -> parameter vector x of the
+    model with `effects`: the 12 offsets, then the effects' parameters): the flat-ground
+    row p_Lz - p_Rz of the held-out recordings through the model at x. On the
+    simulator's true postures and vertical where the recordings keep a ground truth
+    ("true"), else on the logged encoders and the IMU-levelled vertical ("logged").
+    None without held-out recordings."""
+    from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
+    from legcal_bench.estimation.residuals import foot_height_difference
+
+    kin = LegKinematics(legmap)
+    names = legmap.joint_names
+    model = EffectModel(kin, load_effects(list(effects)))
+    heights: dict = {k: [] for k in estimates}
+    kinds = set()
+    for p in paths:
+        rec = load_recording(p, names)
+        if rec.kind != "heldout":
+            continue
+        if truth_path(p).is_file():
+            t = load_truth(p)
+            q = t.q_enc_clean if t.q_enc_clean is not None else t.q_true - t.offsets
+            up = np.array([pos_quat_to_se3(x).rotation.T @ [0, 0, 1.0] for x in t.pelvis_pose_world])
+            kinds.add("true")
+        else:
+            acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
+            q, up = rec.q_enc, up_in_base(acc, kin.R_BI)
+            kinds.add("logged")
+        for key, x in estimates.items():
+            x = np.asarray(x, dtype=float)
+            seg = EffectSegment(model, SegmentData(q, rec.ft, up, q_ref=q + x[:12]))
+            heights[key].append(foot_height_difference(seg.state(model.values(x)), up))
+    if not kinds:
+        return None
+    return {"postures": "+".join(sorted(kinds)),
+            **{k: float(1e3 * rms(np.concatenate(v))) for k, v in heights.items()}}

@@ -1,6 +1,6 @@
 """`legcal-bench diagnose`'s report (issue #17): markdown, JSON and plots of a model-gap
 diagnosis (`legcal_bench.evaluation.modelgap.diagnose`), with the truth's offsets error
-and the held-out foot height before/after when the recordings carry them."""
+before/after when the recordings carry it, and (`--walk`) the two estimates walked."""
 
 from __future__ import annotations
 
@@ -31,7 +31,79 @@ def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | Non
     return out
 
 
-def markdown(report: dict, made_by: str, code: str, truth: dict | None) -> str:
+def heldout_scores(report: dict, legmap, bags: Path) -> dict | None:
+    """Held-out foot height RMS (mm) with the offsets-only estimate and with the
+    diagnosis's final model (its effects at their fitted values)
+    (`legcal_bench.evaluation.scoring.heldout_heights`)."""
+    from legcal_bench.data.recording import list_segments
+    from legcal_bench.evaluation.scoring import heldout_heights
+
+    names = legmap.joint_names
+    effects = list(report["selected"] or report["poor_fit"])
+    params = [p["value"] for p in report["parameters"].values()]
+    before = [report["offsets_only_rad"][n] for n in names]
+    x_before = np.r_[before, np.zeros(len(params))]
+    x_after = np.r_[[report["offsets_rad"][n] for n in names], params]
+    return heldout_heights(legmap, list_segments(bags, allow_partial=True), effects,
+                           {"before": x_before, "after": x_after})
+
+
+def diagnosis_walks(report: dict, legmap, bags: Path, policy: str, trials: int, progress: bool = True) -> dict:
+    """`diagnose --walk`: the policy walked with the true offsets (the session's ground
+    truth; for real logs the diagnosis's final estimate, said so) corrected by the
+    offsets-only estimate and by the estimate after the diagnosis
+    (`legcal_bench.evaluation.closed_loop.estimate_walks`)."""
+    from legcal_bench.data.recording import list_segments, load_truth, truth_path
+    from legcal_bench.evaluation.closed_loop import estimate_walks
+
+    names = legmap.joint_names
+    before = np.array([report["offsets_only_rad"][n] for n in names])
+    after = np.array([report["offsets_rad"][n] for n in names])
+    first = list_segments(bags, allow_partial=True)[0]
+    if truth_path(first).is_file():
+        true_dq, source = np.asarray(load_truth(first).offsets, dtype=float), "the recordings' ground truth"
+    else:
+        true_dq, source = after, "the diagnosis's final estimate (no ground truth in the recordings)"
+    out = estimate_walks(legmap, policy, true_dq, {"offsets_only": before, "after": after}, trials=trials,
+                         progress=progress)
+    out.update(policy=policy, true_offsets=source, same_estimate=bool(np.array_equal(before, after)))
+    return out
+
+
+def walks_line(w: dict) -> str:
+    from legcal_bench.evaluation.metrics import format_mean_std
+
+    return (f"walks ({w['trials']} seeds, {w['seconds']:.0f} s, pelvis RMS deviation from nominal, mm): uncorrected "
+            f"{format_mean_std(w['uncorrected']['pelvis_rms_mm'], 1)}, offsets-only estimate "
+            f"{format_mean_std(w['offsets_only']['pelvis_rms_mm'], 1)}, after the diagnosis "
+            f"{format_mean_std(w['after']['pelvis_rms_mm'], 1)}; nominal spread "
+            f"{format_mean_std(w['nominal_spread']['pelvis_rms_mm'], 1)}")
+
+
+def _walks_table(w: dict) -> list[str]:
+    from legcal_bench.evaluation.metrics import format_mean_std
+
+    L = ["## Closed loop: the two estimates walked", "",
+         f"Policy `{w['policy']}`, {w['trials']} seeds of {w['seconds']:.0f} s; the robot carries the true offsets "
+         f"({w['true_offsets']}); the walking model is the nominal one, so this is the offsets' share of the answer. "
+         "Deviation from the same seed's nominal walk; the nominal spread is a nominal walk with other noise.", "",
+         "| walk | upright | pelvis RMS (mm) | foot-strike RMS (mm) | estimate RMS error (deg) |",
+         "|---|---:|---:|---:|---:|"]
+    for c, label in (("uncorrected", "uncorrected"), ("offsets_only", "corrected, offsets-only estimate"),
+                     ("after", "corrected, after the diagnosis")):
+        r = w[c]
+        err = f"{r['estimate_rms_error_deg']:.4f}" if "estimate_rms_error_deg" in r else "–"
+        L.append(f"| {label} | {w['upright'][c]}/{w['trials']} | {format_mean_std(r['pelvis_rms_mm'], 1)} | "
+                 f"{format_mean_std(r['foot_strike_rms_mm'], 1)} | {err} |")
+    s = w["nominal_spread"]
+    L += [f"| nominal spread | {w['upright']['nominal']}/{w['trials']} | {format_mean_std(s['pelvis_rms_mm'], 1)} | "
+          f"{format_mean_std(s['foot_strike_rms_mm'], 1)} | – |", ""]
+    if w["same_estimate"]:
+        L += ["(No effect was kept: both estimates are the same.)", ""]
+    return L
+
+
+def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: dict | None = None) -> str:
     d, a = report["detection"], report["after"]
     L = [f"# Model-gap diagnosis: {report['verdict']}", "", f"Made by `{made_by}` ({code}).", "",
          f"**{report['summary']}**", "",
@@ -45,6 +117,10 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None) -> str:
                  f"{ha['ratio_to_training']:.4f} (p = {ha['p_value']:.2g}) |")
     if truth:
         L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {truth['after']:.4f} |")
+    hh = report.get("heldout_foot_height_mm")
+    if hh:
+        L.append(f"| held-out foot height RMS ({hh['postures']} postures, mm) | {hh['before']:.4f} | "
+                 f"{hh['after']:.4f} |")
     L += ["", f"Decision rules: {report['rules']}; detection at alpha = {report['alpha']}.", ""]
     if report["parameters"]:
         L += ["| parameter | value | std | unit |", "|---|---|---|---|"]
@@ -70,6 +146,8 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None) -> str:
     L += ["", "| location | delta chi2 | dof |", "|---|---|---|"]
     L += [f"| {c} | {v['delta_chi2']:.1f} | {v['dof']} |" for c, v in t["locations"].items()]
     L += ["", "![trace](trace.png)", ""]
+    if walks:
+        L += _walks_table(walks)
     return "\n".join(L) + "\n"
 
 

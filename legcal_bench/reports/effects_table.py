@@ -58,11 +58,10 @@ def true_parameters(reality_truth: list[dict]) -> dict[str, float]:
 def run_case(robot: str, effect: str | None, seed: int) -> dict:
     """One session set and its fits; `effect` None is a clean case."""
     from legcal_bench.calibrators.base import get_calibrator
-    from legcal_bench.data.recording import list_segments, load_recording, load_session, load_truth
-    from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
-    from legcal_bench.estimation.residuals import foot_height_difference
+    from legcal_bench.data.recording import list_segments, load_session, load_truth
+    from legcal_bench.estimation.effects import EffectModel, load_effects
     from legcal_bench.evaluation.metrics import rms
-    from legcal_bench.geometry.poses import pos_quat_to_se3
+    from legcal_bench.evaluation.scoring import heldout_heights
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.kinematics import LegKinematics
@@ -83,25 +82,15 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
         after = np.array([result.offsets_rad[n] for n in names])
         eff = result.diagnostics.get("effects")
         before = after if eff is None else np.array([eff["offsets_only_rad"][n] for n in names])
-        kin = LegKinematics(legmap)
-        model = EffectModel(kin, load_effects([] if effect is None else [effect]))
+        model = EffectModel(LegKinematics(legmap), load_effects([] if effect is None else [effect]))
         x_after = np.r_[after, [eff["parameters"][n]["value"] for n in model.names[12:]]] if eff else after
         x_before = np.r_[before, np.zeros(model.n - 12)]
-        heights = {"before": [], "after": []}
-        for p in paths:
-            rec = load_recording(p, names)
-            if rec.kind != "heldout":
-                continue
-            t = load_truth(p)
-            up = np.array([pos_quat_to_se3(x).rotation.T @ [0, 0, 1.0] for x in t.pelvis_pose_world])
-            for key, x in (("before", x_before), ("after", x_after)):
-                seg = EffectSegment(model, SegmentData(t.q_enc_clean, rec.ft, up, q_ref=t.q_enc_clean + x[:12]))
-                ek = seg.state(model.values(x))
-                heights[key].append(foot_height_difference(ek, up))
+        heights = heldout_heights(legmap, paths, [] if effect is None else [effect],
+                                  {"before": x_before, "after": x_after})
         row = {"robot": legmap.name, "robot_spec": robot, "effect": effect, "spec": spec, "seed": seed,
                "offsets_rms_deg": {"before": float(np.rad2deg(rms(before - injected))),
                                    "after": float(np.rad2deg(rms(after - injected)))},
-               "heldout_true_mm": {k: float(1e3 * rms(np.concatenate(v))) for k, v in heights.items()},
+               "heldout_true_mm": {k: heights[k] for k in ("before", "after")},
                "seconds": result.timing_s.get("total")}
         if eff is not None:
             true = true_parameters(truth.meta["reality"]["effects"])

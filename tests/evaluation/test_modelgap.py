@@ -42,9 +42,29 @@ def test_a_shank_bent_sideways_is_unexplained_on_the_right_leg(tmp_path):
 def test_diagnose_cli_errors_name_the_fix(tmp_path, capsys):
     from legcal_bench.cli import main
 
-    assert main(["diagnose", "--robot", "a3", "--bags", str(tmp_path), "--out", str(tmp_path / "o"), "--walk"]) == 2
-    assert "--walk: the closed-loop before/after" in capsys.readouterr().err
+    assert main(["diagnose", "--robot", "a3", "--bags", str(tmp_path), "--out", str(tmp_path / "o"),
+                 "--walk", str(tmp_path / "nope.yaml")]) == 2
+    assert "policy spec" in (err := capsys.readouterr().err) and "one of our policies" in err
+    assert main(["diagnose", "--robot", "a3", "--bags", str(tmp_path), "--out", str(tmp_path / "o"),
+                 "--walk", "a3", "--walk-trials", "0"]) == 2
+    assert "--walk-trials 0" in capsys.readouterr().err
     (tmp_path / "r.json").write_text("{")
     assert main(["diagnose", "--robot", "a3", "--bags", str(tmp_path), "--out", str(tmp_path / "o"),
                  "--result", str(tmp_path / "r.json")]) == 2
     assert "--result" in (err := capsys.readouterr().err) and "not a readable result JSON" in err
+
+
+def test_estimate_walks_put_the_true_offsets_on_and_correct_them():
+    import numpy as np
+
+    from legcal_bench.evaluation.closed_loop import estimate_walks
+    from legcal_bench.sim.offsets import resolve_offsets
+
+    lm = load_robot("a3")
+    dq = resolve_offsets("paper@3", lm, np.random.default_rng(0))
+    w = estimate_walks(lm, "a3", dq, {"exact": dq, "half": dq / 2}, trials=1, seconds=3.0, progress=False)
+    assert w["upright"] == {"nominal": 1, "uncorrected": 1, "exact": 1, "half": 1}
+    unc, half, exact = (w[c]["pelvis_rms_mm"]["mean"] for c in ("uncorrected", "half", "exact"))
+    # Corrected by the truth it repeats the nominal walk up to rounding; half-way lies between.
+    assert exact < 0.1 and 10 * exact < half < unc
+    assert w["exact"]["estimate_rms_error_deg"] == 0.0
