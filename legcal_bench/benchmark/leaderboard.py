@@ -269,6 +269,21 @@ def _closed_loop(root: Path) -> list[str]:
     return L
 
 
+def _modelgap(root: Path) -> list[str]:
+    """The model-gap suite's table (`legcal_bench.benchmark.modelgap`), from its JSON."""
+    from legcal_bench.benchmark.modelgap import RESULTS_NAME, markdown, summarize
+
+    path = root / RESULTS_NAME / f"{RESULTS_NAME}.json"
+    if not path.is_file():
+        return []
+    d = json.loads(path.read_text())
+    d["summary"] = summarize(d["rows"])  # the table from the rows, as the suite's own page
+    table = markdown(d, d["made_by"], describe(d["code"])).splitlines()[1:]  # without its title
+    return ["## Model gap: the detect / trace / select loop scored", "",
+            f"Its own page, with every case's verdict: [{RESULTS_NAME}/{RESULTS_NAME}.md]({RESULTS_NAME}/{RESULTS_NAME}.md).",
+            *table, ""]
+
+
 def generate(root: str | Path = "leaderboard") -> str:
     root = Path(root)
     groups, failed = load_results(root / "results")
@@ -307,6 +322,7 @@ def generate(root: str | Path = "leaderboard") -> str:
               "", f"![per joint](plots/{plots[tag + '_joints']})", ""]
     L += _protocol_comparison(root)
     L += _closed_loop(root)
+    L += _modelgap(root)
     L += ["## Matched comparison: inter-foot vs Yamane", "",
           "Same simulated states, noise and held-out split for both methods (the paper's comparison section); "
           "each cell counts the seeds each method wins. The paper found no universal winner.", ""]

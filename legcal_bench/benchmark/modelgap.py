@@ -27,6 +27,7 @@ import numpy as np
 
 from legcal_bench.evaluation.modelgap import ALPHA
 
+RESULTS_NAME = "modelgap"  # its folder and files under the leaderboard root
 LIBRARY = ("imu_tilt", "leg_length", "encoder_scale", "compliance", "hip_axis")
 OUTSIDE = {
     "shank_bent": "link_offset:link={side}_shank,axis=y,mm={size}",

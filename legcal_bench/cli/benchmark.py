@@ -170,7 +170,8 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 
 def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
-    from legcal_bench.benchmark.modelgap import markdown, run
+    from legcal_bench.benchmark.leaderboard import generate
+    from legcal_bench.benchmark.modelgap import RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
@@ -191,9 +192,11 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
                progress=not a.quiet)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
-    write_report(Path(a.out) / "modelgap", md, data, name="modelgap")
+    write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
+    generate(a.out)
     print(md)
-    print(f"{len(data['rows'])} cases, {data['wall_s']:.0f} s wall; {Path(a.out) / 'modelgap' / 'modelgap.md'}")
+    print(f"{len(data['rows'])} cases, {data['wall_s']:.0f} s wall; {Path(a.out) / RESULTS_NAME / 'modelgap.md'}; "
+          f"leaderboard: {Path(a.out) / 'README.md'}")
     return 0
 
 

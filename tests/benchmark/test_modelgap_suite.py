@@ -43,3 +43,20 @@ def test_summary_scores_the_several_effects_and_near_cases():
     near = by["near: imu_tilt"]
     assert (near["in_band"], near["correct_in_band"], near["correct"], near["wrong_confident"]) == (1, 1, 1, 1)
     assert by["clean"]["detected"] == 0 and by["clean"]["chi2_per_dof_at_truth"]["training"]["mean"] == 1.0
+
+
+def test_the_leaderboard_shows_the_suite_from_its_rows(tmp_path):
+    import json
+
+    from legcal_bench.benchmark.leaderboard import generate
+
+    (tmp_path / "results").mkdir()
+    (tmp_path / "modelgap").mkdir()
+    rows = [_row("clean", None, [], "explained", at_truth={"training": 1.0}),
+            _row("library", "imu_tilt", ["leg_length"])]
+    (tmp_path / "modelgap" / "modelgap.json").write_text(json.dumps(
+        {"rows": rows, "made_by": "legcal-bench bench --suite modelgap", "code": {"commit": "abc", "dirty": False}}))
+    text = generate(tmp_path)
+    assert "[modelgap/modelgap.md](modelgap/modelgap.md)" in text
+    line = next(ln for ln in text.splitlines() if ln.startswith("| r | imu_tilt |"))
+    assert "| 0/1 | 1 |" in line  # attributed wrongly, with confidence: counted as such
