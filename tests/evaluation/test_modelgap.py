@@ -21,6 +21,9 @@ def test_clean_data_are_explained_by_the_offsets(tmp_path):
     rep = _diagnose(tmp_path, None)
     assert rep["verdict"] == "explained" and not rep["selected"]
     assert abs(rep["detection"]["z"]) < 5  # chi2 / dof within noise of 1: the noise model is carried right
+    gap = rep["detection"]["heldout"]  # held-out over training chi2/dof, tested against F
+    assert abs(gap["ratio_to_training"] - 1) < 0.05 and gap["p_value"] > 0.005
+    assert rep["steps"] == [] and any("selection not run" in n for n in rep["notes"])  # nothing to explain
     # IMU pitch on a pitch-first hip: reported as confounded, computed.
     assert any("hip_pitch" in c["offsets"] and c["effect"] == "imu_tilt" for c in rep["confounded"])
 
