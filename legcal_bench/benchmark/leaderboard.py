@@ -270,15 +270,20 @@ def _closed_loop(root: Path) -> list[str]:
 
 
 def _modelgap(root: Path) -> list[str]:
-    """The model-gap suite's table (`legcal_bench.benchmark.modelgap`), from its JSON."""
+    """The model-gap suite's table (`legcal_bench.benchmark.modelgap`). Its summary and
+    its own page are views of its rows: rebuilt here from them (and rewritten, so a
+    scoring change reaches both without rerunning the suite)."""
     from legcal_bench.benchmark.modelgap import RESULTS_NAME, markdown, summarize
+    from legcal_bench.files.reports import write_report
 
     path = root / RESULTS_NAME / f"{RESULTS_NAME}.json"
     if not path.is_file():
         return []
     d = json.loads(path.read_text())
-    d["summary"] = summarize(d["rows"])  # the table from the rows, as the suite's own page
-    table = markdown(d, d["made_by"], describe(d["code"])).splitlines()[1:]  # without its title
+    d["summary"] = summarize(d["rows"])
+    page = markdown(d, d["made_by"], describe(d["code"]))
+    write_report(root / RESULTS_NAME, page, d, name=RESULTS_NAME)
+    table = page.splitlines()[1:]  # without its title
     return ["## Model gap: the detect / trace / select loop scored", "",
             f"Its own page, with every case's verdict: [{RESULTS_NAME}/{RESULTS_NAME}.md]({RESULTS_NAME}/{RESULTS_NAME}.md).",
             *table, ""]

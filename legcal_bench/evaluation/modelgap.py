@@ -322,7 +322,10 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
         "steps": steps,
         "parameters": params,
         "offsets_only_rad": dict(zip(names, map(float, base_fit.x[:12]))),
-        "offsets_rad": dict(zip(names, map(float, current_fit.x[:12]))),
+        # The offsets the diagnosis recommends: with the selected effects; the offsets-only
+        # fit's when none is kept (a poor fit's own offsets are kept apart).
+        "offsets_rad": dict(zip(names, map(float, (current_fit if selected else base_fit).x[:12]))),
+        "poor_fit_offsets_rad": dict(zip(names, map(float, current_fit.x[:12]))) if partial else None,
         "offsets_noise_std_rad": dict(zip(names, map(float, sigma0))),
         "tracing": tracing,
         "tracing_after": trace(ctx, final) if selected else None,

@@ -39,8 +39,8 @@ def heldout_scores(report: dict, legmap, bags: Path) -> dict | None:
     from legcal_bench.evaluation.scoring import heldout_heights
 
     names = legmap.joint_names
-    effects = list(report["selected"] or report["poor_fit"])
-    params = [p["value"] for p in report["parameters"].values()]
+    effects = list(report["selected"])  # none kept: the recommended offsets are the offsets-only ones
+    params = [p["value"] for p in report["parameters"].values()] if effects else []
     before = [report["offsets_only_rad"][n] for n in names]
     x_before = np.r_[before, np.zeros(len(params))]
     x_after = np.r_[[report["offsets_rad"][n] for n in names], params]

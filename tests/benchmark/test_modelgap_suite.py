@@ -43,6 +43,9 @@ def test_summary_scores_the_several_effects_and_near_cases():
     near = by["near: imu_tilt"]
     assert (near["in_band"], near["correct_in_band"], near["correct"], near["wrong_confident"]) == (1, 1, 1, 1)
     assert by["clean"]["detected"] == 0 and by["clean"]["chi2_per_dof_at_truth"]["training"]["mean"] == 1.0
+    # Nothing kept (a poor fit): the recommended offsets are the offsets-only ones.
+    poor = summarize([_row("library", "compliance", [], "unexplained")])
+    assert poor[0]["offsets_rms_deg_after"] == 0.1
 
 
 def test_the_leaderboard_shows_the_suite_from_its_rows(tmp_path):

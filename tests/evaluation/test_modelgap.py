@@ -40,6 +40,7 @@ def test_a_shank_bent_sideways_is_unexplained_on_the_right_leg(tmp_path):
     rep = _diagnose(tmp_path, "link_offset:link=right_shank,axis=y,mm=3", seed=1)
     assert rep["verdict"] == "unexplained" and not rep["selected"]
     assert rep["tracing"]["localization"]["location"] == "right leg"
+    assert rep["offsets_rad"] == rep["offsets_only_rad"]  # nothing kept: the offsets-only estimate stands
 
 
 def test_diagnose_cli_errors_name_the_fix(tmp_path, capsys):
