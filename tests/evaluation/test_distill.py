@@ -40,8 +40,10 @@ def test_a_tiny_training_run_exports_a_policy_that_runs_in_both_formats(tmp_path
     its = t["iterations"]
     assert len(its) == 2 and its[0]["beta"] == 1.0 and its[1]["beta"] == 0.5
     assert its[1]["samples"] > its[0]["samples"]  # DAgger aggregates
-    key = [(r["eval_upright"], r["eval_mean_upright_s"], -r["val_loss"]) for r in its]
-    assert key[t["selected_iteration"]] == max(key)  # the rule: most upright, then longest, then lowest loss
+    key = [(r["eval_upright"], sum(e["upright"] for e in r["eval"] if not e["offsets"].startswith("random")),
+            r["eval_mean_upright_s"], -r["val_loss"]) for r in its]
+    # The rule: most upright, then the fixed patterns (none, paper@3), then longest, then lowest loss.
+    assert key[t["selected_iteration"]] == max(key)
     assert "train-policy --robot a3" in t["made_by"] and "--selection-walks 1" in t["made_by"] and t["code"]
     assert its[0]["eval_total"] == 3  # none, paper@3 and one random pattern
 
@@ -76,3 +78,13 @@ def test_train_policy_names_a_missing_teacher_and_bad_counts(tmp_path, capsys, t
     bad.write_text("format: legcal-teacher/1\nfeedback: {roll_gain: 1}\n")
     assert main(["train-policy", "--robot", "a3", "--teacher", str(bad), "--out", str(tmp_path / "x")]) == 2
     assert "feedback: unknown fields ['roll_gain']" in capsys.readouterr().err
+
+
+def test_ties_go_to_the_checkpoint_upright_in_the_fixed_patterns():
+    from legcal_bench.evaluation.distill import Evaluation
+
+    rows = [{"offsets": "none", "upright": True}, {"offsets": "paper@3", "upright": False},
+            {"offsets": "random#0", "upright": True}]
+    a = Evaluation(2, 3, 15.0, rows)
+    b = Evaluation(2, 3, 12.0, [dict(r, upright=r["offsets"] != "random#0") for r in rows])
+    assert (a.fixed_upright, b.fixed_upright) == (1, 2)
