@@ -16,8 +16,14 @@ def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
         shutil.copytree(LEADERBOARD / "designed" / "results", tmp_path / "designed" / "results")
     if (LEADERBOARD / "closed_loop").is_dir():  # and the closed-loop section this
         shutil.copytree(LEADERBOARD / "closed_loop", tmp_path / "closed_loop")
+    if (LEADERBOARD / "modelgap" / "modelgap.json").is_file():  # and the model-gap suite this
+        (tmp_path / "modelgap").mkdir()
+        shutil.copy(LEADERBOARD / "modelgap" / "modelgap.json", tmp_path / "modelgap")
     text = generate(tmp_path)
     assert text == (LEADERBOARD / "README.md").read_text()
+    if (tmp_path / "modelgap").is_dir():  # its page, rebuilt from its rows, is the committed one
+        for name in ("modelgap.md", "modelgap.json"):
+            assert (tmp_path / "modelgap" / name).read_text() == (LEADERBOARD / "modelgap" / name).read_text()
     for png in (tmp_path / "plots").iterdir():
         assert png.read_bytes() == (LEADERBOARD / "plots" / png.name).read_bytes(), png.name
     # Rows the leaderboard must have.
