@@ -142,6 +142,11 @@ def _gap(c: float, d: int, train: Evaluated) -> dict:
             "p_value_vs_declared_noise": float(chi2_dist.sf(c, d))}
 
 
+def _fires(tests: dict) -> bool:
+    """Does the training test or the held-out gap test fire (each at ALPHA / 2)?"""
+    return tests["p_value"] < ALPHA / 2 or tests.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+
+
 def context(cal, robot, recordings) -> Context:
     prep = cal.prepare(robot, recordings)
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
@@ -230,7 +235,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
     cv_current = None
     # Selection only once detection finds a residual the offsets do not explain: an
     # effect is not added to data the offsets-only model already fits within the noise.
-    significant = detection["p_value"] < ALPHA / 2 or detection.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    significant = _fires(detection)
     if not significant:
         notes.append("selection not run: the offsets-only model explains these data within the declared noise")
     # What these data cannot separate, per candidate, whether or not selection runs.
@@ -286,7 +291,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
              "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
     if ctx.heldout:
         after["heldout"] = _gap(*heldout_chi2(ctx, current_fit, final, ctx.heldout), final)
-    residual_left = after["p_value"] < ALPHA / 2 or after.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    residual_left = _fires(after)
     excess = max(base.chi2 - base.dof, 1e-12)
     after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess
     tracing_after = trace(ctx, final) if selected else None
