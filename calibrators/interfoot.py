@@ -39,6 +39,7 @@ from legcal_bench.estimation.observability import analyze, observability_warning
 from legcal_bench.estimation.whitening import frame_covariances, whitening
 from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.preprocess import filter_warnings, select_frames
+from legcal_bench.estimation.smoothing import smooth_wrenches
 from legcal_bench.estimation.problem import Block, Problem
 from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                  uncertainty_warnings)
@@ -238,8 +239,11 @@ class InterFootCalibrator(Calibrator):
             reports.append(rep)
             for s in segs:
                 up = up_in_base(s.imu_acc, kin.R_BI)
-                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames,
-                                          None if r.ft is None else r.ft[s.frames], r.name))
+                ft = None
+                if r.ft is not None:  # smoothed over the segment's span: noisy loads bias a compliance low
+                    a, b = int(s.frames.min()), int(s.frames.max()) + 1
+                    ft = smooth_wrenches(r.time[a:b], r.ft[a:b])[s.frames - a]
+                segments.append(_Prepared(s.name, s.q_enc, up, levelling_rotations(up), s.frames, ft, r.name))
         return segments, reports
 
     def calibrate(self, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:

@@ -19,8 +19,8 @@ ignored: it is fixed in the world by assumption.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
+from legcal_bench.estimation.smoothing import savgol_resampled
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 IMU_WINDOW_S = 0.75  # smoothing window of the second derivative (0.5-1 s works: the motion is ~10 s slow)
@@ -34,22 +34,16 @@ def imu_acceleration(kin: LegKinematics, time: np.ndarray, q: np.ndarray, window
     `q` (N, 12) at `time` (N,), feet fixed. Zero for recordings too short to smooth."""
     time, q = np.asarray(time, dtype=float), np.asarray(q, dtype=float)
     n = len(time)
-    if n < POLYORDER + 2 or time[-1] <= time[0]:
-        return np.zeros((n, 3))
-    dt = (time[-1] - time[0]) / (n - 1)
-    grid = time[0] + dt * np.arange(n)
-    width = int(round(window_s / dt)) | 1  # odd
-    width = min(width, n if n % 2 else n - 1)
-    if width <= POLYORDER:
+    if n < POLYORDER + 2:
         return np.zeros((n, 3))
     fk = frame_kinematics(kin, q)
     p_BI = kin.T_BI[:3, 3]
     acc_B = np.zeros((n, 3))
     for R, p in ((fk.R_L, fk.p_L), (fk.R_R, fk.p_R)):
         p_S = np.einsum("nji,nj->ni", R, p_BI - p)  # IMU position in the sole frame
-        uniform = np.column_stack([np.interp(grid, time, p_S[:, i]) for i in range(3)])
-        a_S = savgol_filter(uniform, width, POLYORDER, deriv=2, delta=dt, axis=0, mode="interp")
-        a_S = np.column_stack([np.interp(time, grid, a_S[:, i]) for i in range(3)])
+        a_S = savgol_resampled(time, p_S, window_s, POLYORDER, deriv=2)
+        if a_S is None:
+            return np.zeros((n, 3))
         acc_B += 0.5 * np.einsum("nij,nj->ni", R, a_S)
     return acc_B @ kin.R_BI
 

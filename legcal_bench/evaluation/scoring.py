@@ -28,6 +28,7 @@ from legcal_bench.errors import CalibrationError, RecordingError
 from legcal_bench.estimation.imu_motion import compensate
 from legcal_bench.estimation.levelling import up_in_base
 from legcal_bench.estimation.residuals import flat_ground_errors
+from legcal_bench.estimation.smoothing import smooth_wrenches
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.geometry.poses import pos_quat_to_se3
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
@@ -187,9 +188,10 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
             acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
             q, up = rec.q_enc, up_in_base(acc, kin.R_BI)
             kinds.add("logged")
+        ft = None if rec.ft is None else smooth_wrenches(rec.time, rec.ft)
         for key, x in estimates.items():
             x = np.asarray(x, dtype=float)
-            seg = EffectSegment(model, SegmentData(q, rec.ft, up, q_ref=q + x[:12]))
+            seg = EffectSegment(model, SegmentData(q, ft, up, q_ref=q + x[:12]))
             heights[key].append(foot_height_difference(seg.state(model.values(x)), up))
     if not kinds:
         return None
