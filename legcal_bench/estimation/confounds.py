@@ -48,6 +48,9 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
     parameter's own-signal sine; plus the parameters not estimable (`held`)."""
     Jq = J[:, :12]
     out: dict = {"effects": {}, "held": []}
+    Qq_all = orth(Jq)
+    beyond = J - Qq_all @ (Qq_all.T @ J)  # every column with the offsets' span removed
+    norms = np.linalg.norm(beyond, axis=0)
     for e in model.effects:
         sl = model.slices[e.name]
         JE = J[:, sl]
@@ -64,6 +67,14 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
             rest = np.delete(J, i, axis=1)
             params[model.names[i]] = {"sine_to_offsets": _sine_to_span(J[:, i], Jq),
                                       "sine_to_all_others": _sine_to_span(J[:, i], rest)}
+        for k, i in enumerate(range(sl.start, sl.stop)):  # the closest other parameter, once the offsets absorbed
+            others = [j for j in range(12, J.shape[1]) if j != i]  # what they can (what a fit confuses it with)
+            if others:
+                c = np.abs(beyond[:, others].T @ beyond[:, i]) / np.maximum(
+                    norms[others] * norms[i], np.finfo(float).tiny)
+                j = others[int(np.argmax(c))]
+                params[model.names[i]]["closest_beyond_offsets"] = {"parameter": model.names[j],
+                                                                    "cosine": float(c.max())}
         vs = {}
         for o in model.effects:
             if o.name != e.name:

@@ -74,7 +74,7 @@ class EncoderScale(Effect):
     name = "encoder_scale"
     summary = "encoder scale of hip pitch, knee and ankle pitch per leg"
     remedy = ("stances spanning a wider range of each pitch joint's angle at similar loads (or the load-varied "
-              "protocol, to part it from compliance)")
+              "protocol, collect --stances I II III IV push press, to part it from compliance)")
 
     def parameters(self, kin):
         return [(label, "1") for label, _ in _role_joints(kin, PITCH_ROLES)]
@@ -91,7 +91,7 @@ class Compliance(Effect):
     name = "compliance"
     summary = "series compliance of hip roll, knee and ankle pitch per leg (load from the ankle F/T)"
     remedy = ("a load-varied protocol: stances pushing the feet apart and together and pitching against the floor, "
-              "measured by the ankle F/T sensors (not in the protocol yet)")
+              "measured by the ankle F/T sensors (collect --stances I II III IV push press)")
     needs_ft = True
 
     def parameters(self, kin):

@@ -23,8 +23,10 @@ from legcal_bench.data.recording import MANIFEST, Recording, Truth, is_session_d
 from legcal_bench.errors import ConfigError, HoldError, IKError
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.protocol.servos import servo_gains
-from legcal_bench.protocol.stances import (ALL_STANCES, STANCES, feasible_trajectory, fit_stance, load_protocol, place,
-                                          posture_bounds)
+from legcal_bench.geometry.lie import inverse
+from legcal_bench.geometry.poses import posture_poses
+from legcal_bench.protocol.stances import (ALL_STANCES, LOAD_STANCES, STANCES, commanded_soles, feasible_trajectory,
+                                          fit_stance, load_protocol, place, posture_bounds)
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -107,7 +109,8 @@ def _segments(cfg: CollectConfig, rng: np.random.Generator, catalog: dict, stanc
         yield "standing", "standing", "standing", cfg.standing_s, 0.0, 0.0
     for s in stances:
         if s not in catalog or s == "standing":
-            raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}, or a protocol file (--protocol)")
+            raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}, the load-varied {list(LOAD_STANCES)}, "
+                              "or a protocol file (--protocol)")
         yield f"stance_{s}", "stance", s, cfg.stance_s, cfg.jitter_m, cfg.jitter_rad
     # Held-out sessions are drawn from the stances being recorded (a robot that cannot
     # hold a lunge is not asked for one in its held-out sessions either).
@@ -167,9 +170,28 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
     motion = feasible_trajectory(sim.nominal, placement, duration, sim.rate_hz, np.random.default_rng(seed + 7919),
                                  return_q=True, period_scale=period_scale)
     clipped = np.clip(motion.postures, low, high)
-    q_cmd = motion.q.copy()
-    q_cmd[(clipped != motion.postures).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
+    if any(fitted.stance.push):  # a load-varied stance: targets for soles displaced from where they are
+        q_cmd = pushed_targets(sim.nominal, placement, clipped, motion.q[0], sim.rate_hz,
+                               np.random.default_rng(seed + 104729))
+    else:
+        q_cmd = motion.q.copy()
+        q_cmd[(clipped != motion.postures).any(axis=1)] = np.nan  # a clipped posture is solved by the simulator's step
     return Segment(*sim.run(clipped, rng, q_cmd=q_cmd, progress=progress), fitted.scale, motion.scale)
+
+
+def pushed_targets(kin, placement, postures: np.ndarray, q_init: np.ndarray, rate_hz: float,
+                   rng: np.random.Generator) -> np.ndarray:
+    """(N, 12) the servo targets of a load-varied stance: each posture's IK with the soles
+    displaced by the stance's push (`commanded_soles`); IKError naming the stance if a
+    displaced sole is out of reach."""
+    left, right = commanded_soles(placement, kin.dims, len(postures), rate_hz, rng)
+    T_BW = inverse(posture_poses(postures))
+    try:
+        return kin.solve_batch(T_BW @ left, T_BW @ right, q_init)
+    except IKError as e:
+        raise IKError(f"stance {placement.stance.name} ({placement.stance.label}): its pushed soles are out of "
+                      f"this robot's reach ({e}); give a smaller push in a protocol file (--protocol, field "
+                      "'push') or leave the stance out") from None
 
 
 def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains_note: str = "",

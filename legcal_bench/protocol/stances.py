@@ -38,6 +38,14 @@ class Stance:
     # Sinusoid amplitudes of the posture components (x, y in leg lengths; z in leg
     # lengths; roll, pitch, yaw in rad).
     amplitude: tuple[float, float, float, float, float, float] = (0.02, 0.03, 0.03, 0.05, 0.08, 0.10)
+    # A load-varied stance: sinusoid amplitudes (period PUSH_PERIOD_S) of a scissor
+    # displacement of the servo targets' soles (fore-aft, lateral and vertical in leg
+    # lengths, pitch in rad; +half on the left sole, -half on the right): the soles stay
+    # where they are, so the legs push them apart and together, shift the weight from one
+    # to the other and pitch them against the floor, and the ankle F/T sensors measure
+    # the loads. The loads then vary apart from the posture, which tells a joint's
+    # compliance from its encoder scale.
+    push: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
 
 
 STANCES: dict[str, Stance] = {
@@ -54,11 +62,27 @@ STANCES: dict[str, Stance] = {
                amplitude=(0.015, 0.03, 0.025, 0.04, 0.06, 0.08)),
     )
 }
+# The optional load-varied protocol (not in the default set): stance I's squat with
+# the soles pushed apart and together while the weight shifts ("push"), or scissored
+# fore-aft and pitched against the floor ("press"); record them with the others
+# (--stances I II III IV push press). Amplitudes chosen on the A3-like robot and the G1
+# (stance I plus each candidate, seed 0, the knee compliance/encoder-scale cosine):
+# larger vertical pushes failed the hold check.
+LOAD_STANCES: dict[str, Stance] = {
+    s.name: s
+    for s in (
+        Stance("push", "normal squat, feet pushing apart and together, weight shifting between them",
+               push=(0.0, 0.03, 0.01, 0.0)),
+        Stance("press", "normal squat, feet scissoring fore-aft and pitching against the floor",
+               push=(0.03, 0.0, 0.0, 0.1)),
+    )
+}
 STANDING = Stance("standing", "straight-leg standing", depth=0.0, amplitude=(0.0,) * 6)
-ALL_STANCES = {**STANCES, "standing": STANDING}
+ALL_STANCES = {**STANCES, **LOAD_STANCES, "standing": STANDING}
 
 # Incommensurate periods (s) so no posture repeats within a stance.
 PERIODS = (11.0, 9.0, 7.0, 5.5, 8.5, 6.5)
+PUSH_PERIOD_S = 4.5  # the load-varied stances' push, faster than any posture component
 
 
 def posture_bounds(dims: RobotDims) -> tuple[np.ndarray, np.ndarray]:
@@ -157,6 +181,32 @@ def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, r
     return placement.nominal + fade * fade * (3 - 2 * fade) * wave
 
 
+def commanded_soles(placement: Placement, dims: RobotDims, n: int, rate_hz: float, rng: np.random.Generator,
+                    ramp_s: float = 3.0) -> tuple[np.ndarray, np.ndarray]:
+    """(left, right) (N, 4, 4): the soles the servo targets are solved for, frame by frame:
+    the placement's, displaced by the stance's `push` (a sinusoid of period
+    PUSH_PERIOD_S with a random phase, faded in like the posture motion), +half on the
+    left sole and -half on the right, in the stance frame: the left sole forward, out
+    (+y), down and toe down while the right one goes back, out (-y), up and toe up."""
+    t = np.arange(n) / rate_hz
+    fade = np.clip(t / ramp_s, 0, 1) if ramp_s > 0 else np.ones(n)
+    wave = fade * fade * (3 - 2 * fade) * np.sin(2 * np.pi * t / PUSH_PERIOD_S + rng.uniform(0, 2 * np.pi))
+    fx, fy, fz, pitch = placement.stance.push
+    out = []
+    for sign, T in ((1.0, placement.left), (-1.0, placement.right)):
+        d = 0.5 * sign * wave  # the left sole is at +y: +d moves it forward and outward, the right one back and out
+        M = np.broadcast_to(T.homogeneous, (n, 4, 4)).copy()
+        M[:, 0, 3] += d * fx * dims.leg_length
+        M[:, 1, 3] += d * fy * dims.leg_length
+        M[:, 2, 3] -= d * fz * dims.leg_length  # the left sole's target below the floor: it takes more weight
+        c, s_ = np.cos(d * pitch), np.sin(d * pitch)
+        Ry = np.zeros((n, 3, 3))
+        Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 1, 1], Ry[:, 2, 0], Ry[:, 2, 2] = c, s_, 1.0, -s_, c
+        M[:, :3, :3] = M[:, :3, :3] @ Ry  # pitched about the sole's own y axis
+        out.append(M)
+    return out[0], out[1]
+
+
 def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray,
                    q: np.ndarray) -> float | np.ndarray:
     """Distance (m) of the CoM's ground projection inside the convex hull of the eight
@@ -205,6 +255,7 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
 # ----------------------------------------------------------------- protocol files
 PROTOCOL_FORMAT = "legcal-protocol"
 _STANCE_FIELDS = ("left_x", "right_x", "extra_width", "toe_out", "depth")
+MAX_PUSH = 0.1  # leg lengths (fore-aft, lateral) and rad (pitch): a protocol file's push amplitudes
 
 
 def write_protocol(path, stances: list[Stance], meta: dict | None = None):
@@ -216,7 +267,8 @@ def write_protocol(path, stances: list[Stance], meta: dict | None = None):
 
     doc = {"format": PROTOCOL_FORMAT, "version": 1, **(meta or {}),
            "stances": [{"name": st.name, "label": st.label, **{k: float(getattr(st, k)) for k in _STANCE_FIELDS},
-                        "amplitude": [float(a) for a in st.amplitude]} for st in stances]}
+                        "amplitude": [float(a) for a in st.amplitude],
+                        **({"push": [float(a) for a in st.push]} if any(st.push) else {})} for st in stances]}
     return atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
 
 
@@ -256,5 +308,12 @@ def load_protocol(path) -> dict[str, Stance]:
                 or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= 0.5 for a in amp)):
             raise ConfigError(f"{where}: field 'amplitude' must be 6 numbers in [0, 0.5] (x, y, z in leg lengths; "
                               f"roll, pitch, yaw in rad), got {amp!r}")
-        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=tuple(float(a) for a in amp), **vals)
+        push = d.get("push", [0.0] * 4)
+        if (not isinstance(push, list) or len(push) != 4
+                or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= MAX_PUSH
+                           for a in push)):
+            raise ConfigError(f"{where}: field 'push' must be 4 numbers in [0, {MAX_PUSH}] (the load-varied scissor: "
+                              f"fore-aft, lateral and vertical in leg lengths, pitch in rad), got {push!r}")
+        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=tuple(float(a) for a in amp),
+                           push=tuple(float(a) for a in push), **vals)
     return out
