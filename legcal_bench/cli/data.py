@@ -43,7 +43,9 @@ def add_commands(sub) -> None:
                    help=f"a reality effect the calibration model lacks (repeatable; only the ground truth says it "
                         f"is there): {EFFECTS_HELP}")
     c.add_argument("--mode", default="weld", choices=("kinematic", "weld", "contact"), help="floor model (default weld)")
-    c.add_argument("--stances", nargs="+", default=["I", "II", "III", "IV"], help="stances to record (default I II III IV)")
+    c.add_argument("--stances", nargs="+", default=["I", "II", "III", "IV"],
+                   help="stances to record (default I II III IV; the optional load-varied push and press: feet "
+                        "pushed against the floor, for compliance)")
     c.add_argument("--offsets", default="paper", help=f"injected offsets: {PRESETS_HELP} (default paper)")
     c.add_argument("--sensors", default="realistic", choices=sorted(SENSOR_PRESETS), help="sensor model (default realistic)")
     c.add_argument("--seed", type=int, default=0)
