@@ -48,8 +48,8 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
     parameter's own-signal sine; plus the parameters not estimable (`held`)."""
     Jq = J[:, :12]
     out: dict = {"effects": {}, "held": []}
-    Qq_all = orth(Jq)
-    beyond = J - Qq_all @ (Qq_all.T @ J)  # every column with the offsets' span removed
+    Qq = orth(Jq)
+    beyond = J - Qq @ (Qq.T @ J)  # every column with the offsets' span removed
     norms = np.linalg.norm(beyond, axis=0)
     for e in model.effects:
         sl = model.slices[e.name]
@@ -57,18 +57,18 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
         angles = subspace_angles(JE, Jq)
         cos = np.cos(angles)
         # The effect direction closest to the offsets' span and the offsets it mimics.
-        QE, Qq = orth(JE), orth(Jq)
+        QE = orth(JE)
         U, _, Vt = np.linalg.svd(Qq.T @ QE)
         mimic = np.linalg.lstsq(Jq, Qq @ U[:, 0], rcond=None)[0]
         b = np.linalg.lstsq(JE, QE @ Vt[0], rcond=None)[0]
         names = [model.names[i] for i in range(sl.start, sl.stop)]
         params = {}
-        for k, i in enumerate(range(sl.start, sl.stop)):
+        for i in range(sl.start, sl.stop):
             rest = np.delete(J, i, axis=1)
             params[model.names[i]] = {"sine_to_offsets": _sine_to_span(J[:, i], Jq),
                                       "sine_to_all_others": _sine_to_span(J[:, i], rest)}
-        for k, i in enumerate(range(sl.start, sl.stop)):  # the closest other parameter, once the offsets absorbed
-            others = [j for j in range(12, J.shape[1]) if j != i]  # what they can (what a fit confuses it with)
+            # The closest other parameter once the offsets absorbed what they can (what a fit confuses it with).
+            others = [j for j in range(12, J.shape[1]) if j != i]
             if others:
                 c = np.abs(beyond[:, others].T @ beyond[:, i]) / np.maximum(
                     norms[others] * norms[i], np.finfo(float).tiny)

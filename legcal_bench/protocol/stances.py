@@ -20,7 +20,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull
 
 from legcal_bench.errors import IKError
-from legcal_bench.geometry.lie import inverse
+from legcal_bench.geometry.lie import Exp, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
 from legcal_bench.robots.kinematics import LegKinematics, RobotDims
 from legcal_bench.sim.double_support import posture_ik
@@ -177,8 +177,14 @@ def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, r
     amp = np.array(placement.stance.amplitude) * [dims.leg_length, dims.leg_length, dims.leg_length, 1, 1, 1]
     phase = rng.uniform(0, 2 * np.pi, 6)
     wave = amp * np.sin(2 * np.pi * t[:, None] / (period_scale * np.array(PERIODS)) + phase)
-    fade = np.clip(t / ramp_s, 0, 1)[:, None] if ramp_s > 0 else np.ones((n, 1))
-    return placement.nominal + fade * fade * (3 - 2 * fade) * wave
+    return placement.nominal + fade_in(t, ramp_s)[:, None] * wave
+
+
+def fade_in(t: np.ndarray, ramp_s: float) -> np.ndarray:
+    """(N,) a smoothstep from 0 at t = 0 to 1 at `ramp_s` (all ones without a ramp): motion
+    starts from rest."""
+    fade = np.clip(t / ramp_s, 0, 1) if ramp_s > 0 else np.ones(len(t))
+    return fade * fade * (3 - 2 * fade)
 
 
 def commanded_soles(placement: Placement, dims: RobotDims, n: int, rate_hz: float, rng: np.random.Generator,
@@ -189,8 +195,7 @@ def commanded_soles(placement: Placement, dims: RobotDims, n: int, rate_hz: floa
     left sole and -half on the right, in the stance frame: the left sole forward, out
     (+y), down and toe down while the right one goes back, out (-y), up and toe up."""
     t = np.arange(n) / rate_hz
-    fade = np.clip(t / ramp_s, 0, 1) if ramp_s > 0 else np.ones(n)
-    wave = fade * fade * (3 - 2 * fade) * np.sin(2 * np.pi * t / PUSH_PERIOD_S + rng.uniform(0, 2 * np.pi))
+    wave = fade_in(t, ramp_s) * np.sin(2 * np.pi * t / PUSH_PERIOD_S + rng.uniform(0, 2 * np.pi))
     fx, fy, fz, pitch = placement.stance.push
     out = []
     for sign, T in ((1.0, placement.left), (-1.0, placement.right)):
@@ -199,10 +204,7 @@ def commanded_soles(placement: Placement, dims: RobotDims, n: int, rate_hz: floa
         M[:, 0, 3] += d * fx * dims.leg_length
         M[:, 1, 3] += d * fy * dims.leg_length
         M[:, 2, 3] -= d * fz * dims.leg_length  # the left sole's target below the floor: it takes more weight
-        c, s_ = np.cos(d * pitch), np.sin(d * pitch)
-        Ry = np.zeros((n, 3, 3))
-        Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 1, 1], Ry[:, 2, 0], Ry[:, 2, 2] = c, s_, 1.0, -s_, c
-        M[:, :3, :3] = M[:, :3, :3] @ Ry  # pitched about the sole's own y axis
+        M[:, :3, :3] = M[:, :3, :3] @ Exp(np.outer(d * pitch, [0, 0, 0, 0, 1.0, 0]))[:, :3, :3]  # about the sole's y
         out.append(M)
     return out[0], out[1]
 
@@ -255,7 +257,7 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
 # ----------------------------------------------------------------- protocol files
 PROTOCOL_FORMAT = "legcal-protocol"
 _STANCE_FIELDS = ("left_x", "right_x", "extra_width", "toe_out", "depth")
-MAX_PUSH = 0.1  # leg lengths (fore-aft, lateral) and rad (pitch): a protocol file's push amplitudes
+MAX_PUSH = 0.1  # leg lengths (fore-aft, lateral, vertical) and rad (pitch): a protocol file's push amplitudes
 
 
 def write_protocol(path, stances: list[Stance], meta: dict | None = None):
