@@ -274,6 +274,19 @@ def write_protocol(path, stances: list[Stance], meta: dict | None = None):
     return atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
 
 
+def _amplitudes(d: dict, field: str, default: tuple, high: float, where: str, meaning: str) -> tuple:
+    """A protocol entry's `field`: len(default) numbers in [0, high] (default if absent);
+    ConfigError naming the field otherwise."""
+    from legcal_bench.errors import ConfigError
+
+    v = d.get(field, list(default))
+    if (not isinstance(v, list) or len(v) != len(default)
+            or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= high for a in v)):
+        raise ConfigError(f"{where}: field '{field}' must be {len(default)} numbers in [0, {high}] ({meaning}), "
+                          f"got {v!r}")
+    return tuple(float(a) for a in v)
+
+
 def load_protocol(path) -> dict[str, Stance]:
     """The stances of a protocol file, by name; ConfigError naming the field and the fix."""
     import yaml
@@ -305,17 +318,9 @@ def load_protocol(path) -> dict[str, Stance]:
                 raise ConfigError(f"{where}: field '{k}' must be a finite number within [-1, 1] (leg lengths or rad), "
                                   f"got {v!r}")
             vals[k] = float(v)
-        amp = d.get("amplitude", list(Stance.amplitude))
-        if (not isinstance(amp, list) or len(amp) != 6
-                or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= 0.5 for a in amp)):
-            raise ConfigError(f"{where}: field 'amplitude' must be 6 numbers in [0, 0.5] (x, y, z in leg lengths; "
-                              f"roll, pitch, yaw in rad), got {amp!r}")
-        push = d.get("push", [0.0] * 4)
-        if (not isinstance(push, list) or len(push) != 4
-                or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= MAX_PUSH
-                           for a in push)):
-            raise ConfigError(f"{where}: field 'push' must be 4 numbers in [0, {MAX_PUSH}] (the load-varied scissor: "
-                              f"fore-aft, lateral and vertical in leg lengths, pitch in rad), got {push!r}")
-        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=tuple(float(a) for a in amp),
-                           push=tuple(float(a) for a in push), **vals)
+        amp = _amplitudes(d, "amplitude", Stance.amplitude, 0.5, where,
+                          "x, y, z in leg lengths; roll, pitch, yaw in rad")
+        push = _amplitudes(d, "push", Stance.push, MAX_PUSH, where,
+                           "the load-varied scissor: fore-aft, lateral and vertical in leg lengths, pitch in rad")
+        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=amp, push=push, **vals)
     return out

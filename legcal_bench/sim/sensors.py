@@ -164,8 +164,8 @@ SENSOR_PRESETS: dict[str, SimSensors] = {
                   imu_mount_rpy=(0.0015, -0.001, 0.0))),
     # The same IMU after an IMU calibration (bias and mounting estimated on a level
     # reference): about 0.1 mrad of residual vertical error. Every axis's bias is within
-    # the declared bound, z too: off level, a z bias b reads a tilt theta as
-    # theta (1 - b/g), so 1 mg of it scales the stances' pelvis pitch by -0.1 % and
+    # the declared bound, z too: off level, a z bias b reads a tilt theta short by
+    # (b/g) sin theta, so 1 mg of it scales the stances' pelvis pitch by -0.1 % and
     # biases a fitted encoder scale (issue #16; it was 0.01 m/s^2 before, 10x the bound).
     "calibrated-imu": SimSensors(
         SensorModel(**_NOISE, accel_bias_bound=0.001, gyro_bias_bound=0.002, imu_mount_bound=0.0001),
