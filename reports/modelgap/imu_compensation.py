@@ -20,11 +20,11 @@ from pathlib import Path
 
 import numpy as np
 from scipy.ndimage import uniform_filter1d
-from scipy.spatial.transform import Rotation
 
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.estimation.imu_motion import compensate
 from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.geometry.poses import pos_quat_to_homogeneous
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
@@ -40,8 +40,7 @@ def _rms(e: np.ndarray) -> float:
 
 def tilt_errors(kin: LegKinematics, rec, truth) -> dict:
     """RMS tilt errors (mrad) of one recording."""
-    P = np.asarray(truth.pelvis_pose_world)
-    R_WI = Rotation.from_quat(P[:, [4, 5, 6, 3]]).as_matrix() @ kin.R_BI
+    R_WI = pos_quat_to_homogeneous(truth.pelvis_pose_world)[:, :3, :3] @ kin.R_BI
     up_I = R_WI[:, 2, :]  # the world's up in the IMU frame: what a still accelerometer reads, normalized
 
     def tilt(f):  # small-angle tilt vector of f against the true up, IMU frame (mrad)

@@ -1,6 +1,6 @@
 """The poor-fit rule's location test on clean data, with and without the `leg_length`
-block in the model: tracing's left-leg score (a 6-dof error after each left-leg joint,
-`LegGeometry`) on the residual of a clean set, its nuisance the fit's own columns; then
+block in the model: tracing's left-leg score (`trace`: a 6-dof error after each left-leg
+joint, `LegGeometry`) on the residual of a clean set, its nuisance the fit's own columns; then
 the same columns on synthetic white noise drawn from the declared covariance, which is
 what the test's chi2(dof) reference assumes.
 
@@ -16,6 +16,7 @@ test while its fit was right.
 
 import sys
 import tempfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -23,9 +24,7 @@ import numpy as np
 from legcal_bench.benchmark.modelgap import _collect
 from legcal_bench.calibrators.base import get_calibrator
 from legcal_bench.calibrators.interfoot import fit_model
-from legcal_bench.estimation.lineartests import score
-from legcal_bench.estimation.signatures import LegGeometry, project_means
-from legcal_bench.evaluation.modelgap import _extra_columns, context, evaluate
+from legcal_bench.evaluation.modelgap import context, evaluate, trace
 
 
 def main(robot: str, mode: str, seed: int) -> None:
@@ -39,15 +38,16 @@ def main(robot: str, mode: str, seed: int) -> None:
             fit = fit_model(cal, ctx.prep, effects)
             ev = evaluate(ctx, fit, ctx.prep.segments, keep_frames=True)
             n = len(ev.frames.r)
-            J = _extra_columns(ctx, fit, [LegGeometry("left")])[0]
-            C = np.einsum("nij,njk->nik", ev.W, project_means(J, ev.frames.segment)).reshape(n * 11, -1)
-            d, dof = score(ev.z, ev.Jw, C)
+            loc = trace(ctx, ev)["locations"]["left leg"]
             lam, U = np.linalg.eigh(ev.cov)
             white = []
-            for _ in range(5):
+            for _ in range(5):  # the same test on noise drawn from the declared covariance
                 r = np.einsum("nij,nj->ni", U * np.sqrt(np.clip(lam, 0, None))[:, None, :],
                               rng.standard_normal((n, 11)))
-                white.append(score(np.einsum("nij,nj->ni", ev.W, r).ravel(), ev.Jw, C)[0])
+                z = np.einsum("nij,nj->ni", ev.W, r).ravel()
+                noise = replace(ev, z=z, step=np.linalg.lstsq(ev.Jw, z, rcond=None)[0])
+                white.append(trace(ctx, noise)["locations"]["left leg"]["delta_chi2"])
+            d, dof = loc["delta_chi2"], loc["dof"]
             model = "offsets + " + "+".join(effects) if effects else "offsets only"
             print(f"  {model:24s} data {d:8.1f} / {dof}; white noise (5 draws) "
                   f"{' '.join(f'{w:.1f}' for w in white)}; chi2/dof of the fit {ev.chi2 / ev.dof:.4f}", flush=True)
