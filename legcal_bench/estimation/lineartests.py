@@ -8,7 +8,14 @@ offsets, the segment means), a candidate's columns C explain
 
 (Rao's score test: chi-square with rank(C after N) degrees of freedom when C is not in
 the data). `chi2_after` is the residual left by a Gauss-Newton step over columns A.
-Ranks are numerical, relative to the largest singular value (`RANK_RTOL`).
+Ranks are numerical, relative to the largest singular value (`RANK_RTOL`). A candidate
+can also be given a `resolution`: how well its columns are known relative to their own
+size. Columns evaluated at measured angles and tilts are known only to about the
+sensors' per-frame noise (rad), and combinations that are exactly collinear on noise-free
+data (a twist of one leg's chain and that leg's offsets and lengths) come apart by that
+much on real data, in directions made of the noise itself, which the residual shares;
+`score` does not test a direction of C whose residue beyond N is below `resolution`
+times C's largest singular value.
 """
 
 from __future__ import annotations
@@ -32,11 +39,16 @@ def chi2_after(z: np.ndarray, A: np.ndarray) -> float:
     return float(z @ z - np.sum((Q.T @ z) ** 2))
 
 
-def score(z: np.ndarray, N: np.ndarray, C: np.ndarray) -> tuple[float, int]:
-    """(delta_chi2, degrees of freedom) of columns C beyond the nuisance columns N."""
+def score(z: np.ndarray, N: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> tuple[float, int]:
+    """(delta_chi2, degrees of freedom) of columns C beyond the nuisance columns N, over
+    the directions of C whose residue beyond N exceeds `resolution` (relative to C's
+    largest singular value; `RANK_RTOL` at least)."""
     Qn = basis(N)
     Cp = C - Qn @ (Qn.T @ C)
     zp = z - Qn @ (Qn.T @ z)
-    Qc = basis(Cp) if np.abs(Cp).max(initial=0.0) > RANK_RTOL * max(np.abs(C).max(initial=0.0), 1e-300) \
-        else Cp[:, :0]
+    if C.shape[1] == 0 or not np.abs(C).max(initial=0.0) > 0:
+        return 0.0, 0
+    U, s, _ = np.linalg.svd(Cp, full_matrices=False)
+    floor = max(resolution, RANK_RTOL) * np.linalg.norm(C, 2)
+    Qc = U[:, s > floor]
     return float(np.sum((Qc.T @ zp) ** 2)), int(Qc.shape[1])

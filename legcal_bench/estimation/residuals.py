@@ -92,13 +92,21 @@ def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fix
     mode "fixed": M held constant (the paper's inner solve); "projected": M = M(dq)
     re-estimated with dq (variable projection; requires M to be the Frechet mean)."""
     r = Log(inverse(M) @ C)
-    A = Jr_inv(r)
-    J = A @ G
+    J = Jr_inv(r) @ G
     if mode == "projected":
-        B = Jl_inv(r)
-        correction = np.linalg.solve(B.sum(axis=0), J.sum(axis=0))  # S^-1 sum_j A_j G_j
-        J -= B @ correction
+        J = project_mean(J, r)
     return r, J
+
+
+def project_mean(J: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Fixed-mean feet columns J (N, 6, P) of one segment, A_k G_k, with the segment's
+    Frechet mean re-estimated (variable projection): J_k - B_k S^-1 sum_j J_j, B = Jl_inv(r),
+    S = sum_j B_j, r (N, 6) the feet residuals. Columns tested against each other must all
+    be projected this way: a plain average instead differs from it by O(|r|), which breaks
+    exact collinearities (a constant twist of one sole is a mean change) at ~1e-4 and
+    leaves directions made of the residual itself."""
+    B = Jl_inv(r)
+    return J - B @ np.linalg.solve(B.sum(axis=0), J.sum(axis=0))
 
 
 def flat_ground_errors(fk: FrameKinematics, up_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.estimation.effects import Effect
+from legcal_bench.estimation.residuals import project_mean
 from legcal_bench.robots.kinematics import LegKinematics
 
 FAMILIES = ("angle", "load", "motion")
@@ -63,12 +64,12 @@ def time_columns(segment: np.ndarray, t: np.ndarray) -> np.ndarray:
     return C
 
 
-def project_means(C: np.ndarray, segment: np.ndarray) -> np.ndarray:
-    """Columns C (N, 11, P) with each segment's inter-foot mean re-estimated, as the fit
-    does (variable projection): the feet rows less their segment average (first order
-    in the residual, which is ~1e-4; the flat rows have no mean)."""
+def project_means(C: np.ndarray, segment: np.ndarray, r_feet: np.ndarray) -> np.ndarray:
+    """Fixed-mean columns C (N, 11, P) with each segment's inter-foot mean re-estimated
+    exactly as the fit's own columns are (`residuals.project_mean`, from the frames' feet
+    residuals r_feet (N, 6)); the flat rows have no mean."""
     out = np.array(C, dtype=float, copy=True)
     for s in np.unique(segment):
         m = segment == s
-        out[m, :6] -= out[m, :6].mean(axis=0)
+        out[m, :6] = project_mean(out[m, :6], r_feet[m])
     return out

@@ -96,6 +96,9 @@ class Context:
     sigma_t: float
     heldout: list = field(default_factory=list)  # held-out segments
     recordings: dict = field(default_factory=dict)  # name -> Recording (velocities for tracing)
+    # How well tracing's columns are known (`lineartests.score`): the largest angular
+    # noise of a frame's residual rows (rad), the inter-foot rotation or a sole normal.
+    resolution: float = 0.0
 
 
 def _free_columns(fit) -> list[int]:
@@ -155,7 +158,8 @@ def context(cal, robot, recordings) -> Context:
                                "accel_noise_std); a residual cannot be judged against noise nobody declared")
     held = [r for r in recordings if r.kind == "heldout"]
     heldout, _ = cal.segments_of(prep.kin, held) if held else ([], [])
-    return Context(cal, prep, sig["encoder"], sig["tilt"], heldout, {r.name: r for r in recordings})
+    return Context(cal, prep, sig["encoder"], sig["tilt"], heldout, {r.name: r for r in recordings},
+                   max(sig["feet_rotation"], sig["flat_normal"]))
 
 
 def _offsets_sigma(ev: Evaluated) -> np.ndarray:
@@ -390,7 +394,7 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     # columns are the nuisance.
 
     def whiten(C):
-        return np.einsum("nij,njk->nik", W, project_means(C, fr.segment)).reshape(n * 11, -1)
+        return np.einsum("nij,njk->nik", W, project_means(C, fr.segment, fr.r[:, :6])).reshape(n * 11, -1)
 
     Qn = basis(ev.Jw)
     zr = ev.z - Qn @ (Qn.T @ ev.z)
@@ -399,7 +403,7 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     groups = {f"{side} leg": whiten(J) for side, J in zip(SIDES, legs)}
     groups["IMU"] = whiten(fr.H)
     for name, C in groups.items():
-        d, dof = score(zr, Qn, C)
+        d, dof = score(zr, Qn, C, ctx.resolution)
         out["locations"][name] = {"delta_chi2": d, "dof": dof, "excess": d - dof, "log10_p": _log10_sf(d, dof)}
     # Signatures per joint.
     values = {"angle": fr.q_enc, "load": _loads(ctx, fr), "motion": _motion(ctx, fr)}
@@ -411,13 +415,13 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
         C = whiten(joint_columns(fr.G, v))
         per = []
         for j in range(12):
-            d, dof = score(zr, Qn, C[:, [j]])
+            d, dof = score(zr, Qn, C[:, [j]], ctx.resolution)
             per.append({"joint": names[j], "delta_chi2": d, "dof": dof, "excess": d - dof,
                         "log10_p": _log10_sf(d, dof)})
         out["signatures"][fam] = per
     t = np.array([ctx.recordings[r].time[i] for r, i in zip(fr.recording, fr.time_index)]) \
         if all(r in ctx.recordings for r in set(fr.recording)) else fr.time_index.astype(float)
-    d, dof = score(zr, Qn, whiten(time_columns(fr.segment, t)))
+    d, dof = score(zr, Qn, whiten(time_columns(fr.segment, t)), ctx.resolution)
     out["signatures"]["time"] = [{"joint": "(every row, per segment)", "delta_chi2": d, "dof": dof,
                                   "excess": d - dof, "log10_p": _log10_sf(d, dof)}]
     # The location explaining the most beyond what its parameters would take from noise.

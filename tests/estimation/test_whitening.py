@@ -35,3 +35,20 @@ def test_the_score_test_is_the_chi2_a_refit_over_the_extra_columns_removes():
     assert dof == 2
     assert np.isclose(d, chi2_after(z, N) - chi2_after(z, np.hstack([N, C])), rtol=1e-10)
     assert score(z, N, N[:, :2])[1] == 0  # columns already in the nuisance add nothing
+
+
+def test_a_direction_below_the_columns_resolution_is_not_tested():
+    # A column exactly collinear with the nuisance on noise-free data, which the noise
+    # moves off it by ~1e-4 of its size in a direction the residual shares (as columns
+    # evaluated at measured angles do): without a resolution the test takes that
+    # direction at full weight; with the sensors' resolution it is not tested, while a
+    # column 1 % off the nuisance still is.
+    rng = np.random.default_rng(2)
+    N = rng.standard_normal((2000, 4))
+    z = rng.standard_normal(2000)
+    zp = z - N @ np.linalg.lstsq(N, z, rcond=None)[0]
+    noise_made = N @ [1.0, 0.5, 0.0, 0.0] + 1e-4 * np.linalg.norm(N[:, 0]) * zp / np.linalg.norm(zp)
+    assert score(z, N, noise_made[:, None])[0] > 0.99 * zp @ zp  # takes all of the residual
+    assert score(z, N, noise_made[:, None], resolution=1e-3) == (0.0, 0)
+    real = N @ [1.0, 0.5, 0.0, 0.0] + 1e-2 * rng.standard_normal(2000) * np.linalg.norm(N[:, 0]) / np.sqrt(2000)
+    assert score(z, N, real[:, None], resolution=1e-3)[1] == 1
