@@ -393,14 +393,17 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     # Every column with the segment means re-estimated, as in the fit; the fit's own
     # columns are the nuisance.
 
-    def whiten(C):
-        return np.einsum("nij,njk->nik", W, project_means(C, fr.segment, fr.r[:, :6])).reshape(n * 11, -1)
+    def white(C):
+        return np.einsum("nij,njk->nik", W, C).reshape(n * 11, -1)
+
+    def whiten(C):  # fixed-mean columns: the means re-estimated first
+        return white(project_means(C, fr.segment, fr.r[:, :6]))
 
     Qn = basis(ev.Jw)
     zr = ev.z - Qn @ (Qn.T @ ev.z)
     # Locations: a generic geometric error of each leg, the IMU's tilt.
     legs = _extra_columns(ctx, ev.fit, [LegGeometry(side) for side in SIDES])
-    groups = {f"{side} leg": whiten(J) for side, J in zip(SIDES, legs)}
+    groups = {f"{side} leg": white(J) for side, J in zip(SIDES, legs)}
     groups["IMU"] = whiten(fr.H)
     for name, C in groups.items():
         d, dof = score(zr, Qn, C, ctx.resolution)
@@ -444,12 +447,13 @@ def _log10_sf(x: float, dof: int) -> float:
 
 
 def _extra_columns(ctx: Context, fit, effects) -> list[np.ndarray]:
-    """Per effect of `effects` (instances, at zero), its held-mean Jacobian columns
-    (N, 11, P) at `fit` over all the segments (one evaluation for all)."""
+    """Per effect of `effects` (instances, at zero), its Jacobian columns (N, 11, P) at
+    `fit` over all the segments, the segment means re-estimated as for the fit's own
+    columns (one evaluation for all)."""
     from legcal_bench.calibrators.interfoot import frame_residuals
 
     ex = frame_residuals(ctx.cal, ctx.prep, fit, ctx.prep.segments, extra=effects)
-    return [ex.J_fixed[:, :, ex.model.slices[e.name]] for e in effects]
+    return [ex.J[:, :, ex.model.slices[e.name]] for e in effects]
 
 
 def _loads(ctx: Context, fr) -> np.ndarray | None:

@@ -14,8 +14,8 @@ combinations of the leg's geometry with the fitted lengths and offsets that are 
 collinear on noise-free data and that the noise moves apart by ~1e-4 of their size
 (those singular values scale with the noise: ~6e-6 at 1 % of it), and through mean
 columns averaged plainly where the fit projects them. The model-gap suite's one A3-like
-leg-length "poor fit" (seed 7) failed this test while its fit was right. Since the next
-commit tracing projects its columns as the fit does and does not test directions below
+leg-length "poor fit" (seed 7) failed this test while its fit was right. Since commit
+a2bab88 tracing projects its columns as the fit does and does not test directions below
 the sensors' resolution (`lineartests.score`): 19.7 on 14 dof.
 """
 
