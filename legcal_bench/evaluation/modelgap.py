@@ -6,8 +6,9 @@ Detection. The declared noise model, carried to each frame's residual
 (`legcal_bench.estimation.whitening`), whitens it; for a model that explains the data
 the whitened chi-square is chi2(dof), dof = sum of the frames' ranks - 6 per segment
 (the inter-foot means) - the free parameters. Each fit's chi-square is taken after one
-Gauss-Newton step of the whitened problem from that fit (the calibrator weighs rows by
-a diagonal approximation of the same noise; the step makes models comparable). Tests,
+Gauss-Newton step of the whitened problem from that fit (the `sensor` setting's fit ends
+at that problem's optimum, where the step is ~0; a row-weighted fit of another setting
+is brought there, which makes models comparable). Tests,
 each at ALPHA / 2: the training chi-square against chi2(dof), and the gap between the
 held-out sessions' chi-square per dof (at the training estimate) and the training's,
 against F (`_gap`).
@@ -45,7 +46,8 @@ from legcal_bench.estimation.effects import joint_loads, load_effects, registry
 from legcal_bench.estimation.lineartests import basis, chi2_after, score
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
-from legcal_bench.estimation.whitening import ROW_CHANNELS, expected_rows, frame_covariances, whitening
+from legcal_bench.estimation.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
+                                               whitening)
 from legcal_bench.robots.legmap import SIDES
 
 ALPHA = 0.01  # false-alarm rate of the detection tests together (each at ALPHA / 2)
@@ -113,14 +115,13 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -
 
     fr = frame_residuals(ctx.cal, ctx.prep, fit, segments, extra)
     cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
-    W, rank = whitening(cov)
-    z = np.einsum("nij,nj->ni", W, fr.r).ravel()
     free = _free_columns(fit)
-    Jw = np.einsum("nij,njk->nik", W, fr.J[:, :, free]).reshape(-1, len(free))
+    z, Jw, rank = whitened_system(fr.r, fr.J[:, :, free], cov)
+    W = whitening(cov)[0] if keep_frames else None
     step = np.linalg.lstsq(Jw, z, rcond=None)[0]
     n_seg = len(np.unique(fr.segment))
     return Evaluated(fit, z, Jw, chi2_after(z, Jw), int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
-                     fr if keep_frames else None, W if keep_frames else None, cov if keep_frames else None)
+                     fr if keep_frames else None, W, cov if keep_frames else None)
 
 
 def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, int]:

@@ -96,3 +96,24 @@ def test_nan_frames_slip_and_lifted_foot_are_filtered_and_counted(tmp_path_facto
     assert f1["non_finite"] == 3 and f1["rotation"] == 10
     assert f2["slip_splits"] == 1 and f2["pieces"] == ["stance_II#1", "stance_II#2"]
     assert any("stance_I:" in w and "3 non-finite" in w for w in res.warnings)
+
+
+def test_the_sensor_setting_ends_with_the_generalized_least_squares_and_its_posterior_holds(tmp_path_factory):
+    """The "sensor" fit whitens every frame by its declared covariance: its error is well
+    below the row-weighted solution it starts from (the last iterate before the refinement,
+    the fit of commit c30118a and before), and its posterior predicts that error."""
+    lm = load_robot("a3")
+    z2, sq_gls, sq_rows = [], 0.0, 0.0
+    for seed in range(3):
+        _, recs, _ = _session(tmp_path_factory, "a3", mode="kinematic", sensors="calibrated-imu", seed=seed)
+        res = get_calibrator("interfoot", setting="sensor").calibrate(lm, recs)
+        truth = paper_injection(lm)
+        err = res.offsets_vector(lm.joint_names) - truth
+        rows = np.asarray(res.diagnostics["history_after_trim"][-1]) - truth
+        std = np.array([res.diagnostics["posterior"]["std_rad"][n] for n in lm.joint_names])
+        assert res.diagnostics["generalized_least_squares"]["converged"]
+        z2 += list((err / std) ** 2)
+        sq_gls, sq_rows = sq_gls + err @ err, sq_rows + rows @ rows
+    # 36 offsets: the mean z^2 of a right posterior lies in [0.54, 1.57] 95 % of the time.
+    assert 0.4 < np.mean(z2) < 2.0, np.mean(z2)
+    assert sq_gls < 0.5 * sq_rows, (sq_gls, sq_rows)

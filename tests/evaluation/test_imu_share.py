@@ -39,7 +39,12 @@ def test_the_imu_tilt_share_is_attributed(sets, robot, calibrator, options):
     rec = score(str(out), res, lm)["recovery"]
     # The realized IMU vertical error: 2.04 mrad of x bias over g plus 1.0 mrad of mount pitch.
     assert rec["imu_tilt_mrad"][1] == pytest.approx(3.0, abs=0.05)
-    assert min(rec["pitch_sum_error_deg"]["left"], rec["pitch_sum_error_deg"]["right"]) > 0.15
+    # 3 mrad is 0.172 deg. On a pitch-first hip (A3-like) the tilt is exactly equal hip-pitch
+    # offsets: the pitch sums take all of it. On a roll-first hip (A2-like) it is offsets plus
+    # equal hip roll/yaw axis tilts, and how much lands in the pitch sums depends on the fit's
+    # weights (above 0.15 deg row-weighted, 0.135 deg with the generalized least squares).
+    least = 0.15 if robot == "a3" else 0.10
+    assert min(rec["pitch_sum_error_deg"]["left"], rec["pitch_sum_error_deg"]["right"]) > least
     rel = rec["vs_imu_vertical"]["pitch_sum_error_deg"]
     assert max(abs(rel["left"]), abs(rel["right"])) < 0.01, rel
     assert rec["imu_share_rms_deg"] > 0.05 and rec["vs_imu_vertical"]["rms_error_deg"] < rec["rms_error_deg"]
