@@ -487,13 +487,10 @@ class _InterFootProblem:
         self.build(kept)
 
 
-def _noise_weights(kin: LegKinematics, stances: list[Recording]) -> InterFootWeights:
-    """Row weights 1/sigma from the recordings' declared noise (the confound report's
-    and the posterior's scaling); raises when the recordings declare none."""
-    sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
-    if sig is None:
-        raise CalibrationError("effects: the recordings declare no sensor noise; the confound report and the "
-                               "posterior need it (sensor_model.encoder_noise_std, accel_noise_std)")
+def _noise_weights(prep: Prepared) -> InterFootWeights:
+    """Row weights 1/sigma from the recordings' declared noise (the contact check's
+    scaling); raises when the recordings declare none."""
+    sig = declared_noise(prep)
     return InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
         sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
 
@@ -698,13 +695,12 @@ def whitens(prep: Prepared) -> bool:
     return prep.setting_name == "sensor"
 
 
-def whitened_rows(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit,
-                  segments: list[_Prepared] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(z, Jw, rank): the residual rows of `segments` (default: the fit's) at `fit` and
-    their Jacobian over every column of `fit.model` (held ones too, segment means
-    eliminated), each frame whitened by its declared covariance (`whitening`)."""
+def whitened_rows(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(z, Jw, rank): the residual rows of the fit's segments at `fit` and their Jacobian
+    over every column of `fit.model` (held ones too, segment means eliminated), each
+    frame whitened by its declared covariance (`whitening`)."""
     sig = declared_noise(prep)
-    fr = frame_residuals(cal, prep, fit, fit.segments if segments is None else segments)
+    fr = frame_residuals(cal, prep, fit, fit.segments)
     cov = frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"])
     return whitened_system(fr.r, fr.J[:, :, :fit.model.n], cov)
 
@@ -766,7 +762,7 @@ def contact_check(cal: InterFootCalibrator, prep: Prepared, segments: list[_Prep
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
     if sig is None or len({s.recording for s in segments}) < 2:
         return None
-    problem = _InterFootProblem(prep.kin, segments, _noise_weights(prep.kin, prep.stances), None, [], cal.bound)
+    problem = _InterFootProblem(prep.kin, segments, _noise_weights(prep), None, [], cal.bound)
     dq, _ = problem.solve(dq0, cal)
     final: dict[str, StanceContact] = {}
     while True:

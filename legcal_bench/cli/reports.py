@@ -60,7 +60,7 @@ def cmd_regression(a: argparse.Namespace) -> int:
     return 1 if problems else 0
 
 
-def _case_table(a: argparse.Namespace, module, option: str, known, name: str, made_by: str) -> dict:
+def _case_table(a: argparse.Namespace, module, option: str, known, name: str, made_by: str, **build) -> dict:
     """A per-robot, per-case, per-seed report (`module.build` / `markdown`): the choices
     in `--<option>` checked against `known`, written to `--out` as `name`.md/.json."""
     from legcal_bench.errors import ConfigError
@@ -74,7 +74,7 @@ def _case_table(a: argparse.Namespace, module, option: str, known, name: str, ma
     if a.seeds < 1:
         raise ConfigError(f"--seeds {a.seeds}: need at least 1")
     code = code_version()
-    data = module.build(a.robots, chosen, a.seeds, a.workers, progress=not a.quiet)
+    data = module.build(a.robots, chosen, a.seeds, a.workers, progress=not a.quiet, **build)
     data.update(made_by=made_by, code=code)
     md = module.markdown(data, made_by, describe(code))
     write_report(a.out, md, data, name=name)
@@ -87,9 +87,17 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
 
     from legcal_bench.reports import effects_table
 
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.protocol.stances import ALL_STANCES
+
+    bad = [s for s in a.stances if s not in ALL_STANCES or s == "standing"]
+    if bad:
+        raise ConfigError(f"--stances {bad}: use stances from {[s for s in ALL_STANCES if s != 'standing']}")
     made_by = (f"legcal-bench effects-table --robots {' '.join(a.robots)} --effects {' '.join(a.effects)} "
-               f"--seeds {a.seeds}")
-    data = _case_table(a, effects_table, "effects", effects_table.EFFECTS, "effects_table", made_by)
+               f"--seeds {a.seeds}" + ("" if tuple(a.stances) == effects_table.DEFAULT_STANCES
+                                       else f" --stances {' '.join(a.stances)}"))
+    data = _case_table(a, effects_table, "effects", effects_table.EFFECTS, "effects_table", made_by,
+                       stances=tuple(a.stances))
     effects_table.plot(data, Path(a.out) / "effects_table.png")
     print(f"wrote {a.out}/effects_table.md, .json, .png")
     return 0
@@ -158,6 +166,12 @@ def add_commands(sub) -> None:
         t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
         t.add_argument("--out", default=out)
         t.add_argument("--quiet", action="store_true")
+        if name == "effects-table":
+            from legcal_bench.protocol.stances import STANCES
+
+            t.add_argument("--stances", nargs="+", default=list(STANCES),
+                           help="stances to record (default I II III IV; the range stance 'tall' separates the "
+                                "encoder scales from the offsets)")
         t.set_defaults(func=func)
 
     rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")

@@ -77,8 +77,21 @@ LOAD_STANCES: dict[str, Stance] = {
                push=(0.03, 0.0, 0.0, 0.1)),
     )
 }
+# The optional range stance (not in the default set): the legs nearly straight while the
+# pelvis sways, so each pitch joint works far from the squats' angles (the knee ~0.2 rad
+# instead of ~1). In the squats a pitch joint's angle moves little about its mean, so its
+# encoder scale looks like its offset; with this stance the scale's price on the offsets'
+# posterior falls from ~1.7x to ~1.3x (A3-like, A2-like, G1; record --stances I II III IV
+# tall). No vertical sway: straight legs cannot lengthen.
+RANGE_STANCES: dict[str, Stance] = {
+    s.name: s
+    for s in (
+        Stance("tall", "near-straight legs, the pelvis swaying", depth=0.005,
+               amplitude=(0.02, 0.03, 0.0, 0.05, 0.08, 0.10)),
+    )
+}
 STANDING = Stance("standing", "straight-leg standing", depth=0.0, amplitude=(0.0,) * 6)
-ALL_STANCES = {**STANCES, **LOAD_STANCES, "standing": STANDING}
+ALL_STANCES = {**STANCES, **LOAD_STANCES, **RANGE_STANCES, "standing": STANDING}
 
 # Incommensurate periods (s) so no posture repeats within a stance.
 PERIODS = (11.0, 9.0, 7.0, 5.5, 8.5, 6.5)

@@ -23,7 +23,10 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.protocol.stances import STANCES
+
 EFFECTS = ("imu_tilt", "leg_length", "encoder_scale", "compliance", "hip_axis")
+DEFAULT_STANCES = tuple(STANCES)  # the paper's four
 
 
 def effect_spec(effect: str, seed: int) -> str:
@@ -55,8 +58,8 @@ def true_parameters(reality_truth: list[dict]) -> dict[str, float]:
     return out
 
 
-def run_case(robot: str, effect: str | None, seed: int) -> dict:
-    """One session set and its fits; `effect` None is a clean case."""
+def run_case(robot: str, effect: str | None, seed: int, stances: tuple[str, ...] = DEFAULT_STANCES) -> dict:
+    """One session set (`stances` recorded) and its fits; `effect` None is a clean case."""
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
     from legcal_bench.estimation.effects import EffectModel, load_effects
@@ -69,7 +72,7 @@ def run_case(robot: str, effect: str | None, seed: int) -> dict:
     legmap = load_robot(robot)
     spec = None if effect is None else effect_spec(effect, seed)
     with tempfile.TemporaryDirectory(prefix="legcal_effects_") as work:
-        cfg = CollectConfig(robot=robot, mode="weld", sensors="calibrated-imu", seed=seed,
+        cfg = CollectConfig(robot=robot, mode="weld", sensors="calibrated-imu", seed=seed, stances=tuple(stances),
                             effects=() if spec is None else (spec,))
         collect(cfg, Path(work) / "set", progress=False)
         recs = load_session(Path(work) / "set", robot=legmap)
@@ -113,13 +116,14 @@ def _case(args):
     return run_case(*args)
 
 
-def build(robots, effects=EFFECTS, seeds: int = 10, workers: int = 2, progress: bool = True) -> dict:
+def build(robots, effects=EFFECTS, seeds: int = 10, workers: int = 2, progress: bool = True,
+          stances: tuple[str, ...] = DEFAULT_STANCES) -> dict:
     """Every case (clean ones included) on `workers` processes."""
     from legcal_bench.files.parallel import map_with_progress
 
-    jobs = [(r, e, s) for r in robots for e in (None, *effects) for s in range(seeds)]
+    jobs = [(r, e, s, tuple(stances)) for r in robots for e in (None, *effects) for s in range(seeds)]
     rows = map_with_progress(_case, jobs, workers, "effects-table", progress)
-    return {"rows": rows, "summary": summarize(rows)}
+    return {"rows": rows, "summary": summarize(rows), "stances": list(stances)}
 
 
 def summarize(rows: list[dict]) -> list[dict]:
@@ -159,7 +163,8 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 def markdown(data: dict, made_by: str, code: str) -> str:
     lines = ["# Model gap: offsets-only fit vs the fit with the effect added", "",
-             f"Made by `{made_by}` ({code}). Weld mode, `calibrated-imu` sensors, the paper's injection, "
+             f"Made by `{made_by}` ({code}). Weld mode, stances {' '.join(data.get('stances', DEFAULT_STANCES))}, "
+             "`calibrated-imu` sensors, the paper's injection, "
              "`interfoot` with the `sensor` setting. Offsets: RMS error of the 12 offsets (deg), mean over seeds; "
              "floor: the same on clean data. Held-out: RMS foot-height difference (mm) at the held-out sessions' "
              "true postures, flat floor. z: (estimate - truth) / posterior std of the effect's true parameter. "
