@@ -73,8 +73,8 @@ class LegLength(Effect):
 class EncoderScale(Effect):
     name = "encoder_scale"
     summary = "encoder scale of hip pitch, knee and ankle pitch per leg"
-    remedy = ("stances spanning a wider range of each pitch joint's angle at similar loads (or the load-varied "
-              "protocol, collect --stances I II III IV push press, to part it from compliance)")
+    remedy = ("stances spanning a wider range of each pitch joint's angle (the range stance: collect --stances I II "
+              "III IV tall; the load-varied protocol, push press, parts it from compliance)")
 
     def parameters(self, kin):
         return [(label, "1") for label, _ in _role_joints(kin, PITCH_ROLES)]
