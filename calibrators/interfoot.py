@@ -701,8 +701,9 @@ def whitened_rows(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> tu
     frame whitened by its declared covariance (`whitening`)."""
     sig = declared_noise(prep)
     fr = frame_residuals(cal, prep, fit, fit.segments)
-    cov = frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"])
-    return whitened_system(fr.r, fr.J[:, :, :fit.model.n], cov)
+    W, rank = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
+    z, Jw = whitened_system(fr.r, fr.J[:, :, :fit.model.n], W)
+    return z, Jw, rank
 
 
 REFINE_MAX_STEPS = 6

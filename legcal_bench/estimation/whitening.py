@@ -65,13 +65,12 @@ def whiten(r: np.ndarray, cov: np.ndarray) -> Whitened:
     return Whitened(np.einsum("nij,nj->ni", W, r), rank)
 
 
-def whitened_system(r: np.ndarray, J: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Frames' residuals r (N, 11) and Jacobians J (N, 11, k) whitened by their
-    covariances (N, 11, 11), stacked: (z (11 N,), Jw (11 N, k), rank (N,)). The
+def whitened_system(r: np.ndarray, J: np.ndarray, W: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Frames' residuals r (N, 11) and Jacobians J (N, 11, k) whitened by W (N, 11, 11,
+    `whitening` of their covariances), stacked: (z (11 N,), Jw (11 N, k)). The
     generalized least-squares problem min |z - Jw dx|^2 weighs every frame by its own
     noise, the rows' correlations included."""
-    W, rank = whitening(cov)
-    return np.einsum("nij,nj->ni", W, r).ravel(), np.einsum("nij,njk->nik", W, J).reshape(-1, J.shape[2]), rank
+    return np.einsum("nij,nj->ni", W, r).ravel(), np.einsum("nij,njk->nik", W, J).reshape(-1, J.shape[2])
 
 
 def expected_rows(cov: np.ndarray) -> np.ndarray:

@@ -115,13 +115,13 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -
 
     fr = frame_residuals(ctx.cal, ctx.prep, fit, segments, extra)
     cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
+    W, rank = whitening(cov)
     free = _free_columns(fit)
-    z, Jw, rank = whitened_system(fr.r, fr.J[:, :, free], cov)
-    W = whitening(cov)[0] if keep_frames else None
+    z, Jw = whitened_system(fr.r, fr.J[:, :, free], W)
     step = np.linalg.lstsq(Jw, z, rcond=None)[0]
     n_seg = len(np.unique(fr.segment))
     return Evaluated(fit, z, Jw, chi2_after(z, Jw), int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
-                     fr if keep_frames else None, W, cov if keep_frames else None)
+                     fr if keep_frames else None, W if keep_frames else None, cov if keep_frames else None)
 
 
 def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, int]:
