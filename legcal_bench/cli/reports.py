@@ -87,12 +87,9 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
 
     from legcal_bench.reports import effects_table
 
-    from legcal_bench.errors import ConfigError
-    from legcal_bench.protocol.stances import ALL_STANCES
+    from legcal_bench.protocol.stances import check_stance_names
 
-    bad = [s for s in a.stances if s not in ALL_STANCES or s == "standing"]
-    if bad:
-        raise ConfigError(f"--stances {bad}: use stances from {[s for s in ALL_STANCES if s != 'standing']}")
+    check_stance_names(a.stances)
     made_by = (f"legcal-bench effects-table --robots {' '.join(a.robots)} --effects {' '.join(a.effects)} "
                f"--seeds {a.seeds}" + ("" if tuple(a.stances) == effects_table.DEFAULT_STANCES
                                        else f" --stances {' '.join(a.stances)}"))

@@ -25,7 +25,7 @@ from legcal_bench.files.atomic import replace_dir
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import posture_poses
-from legcal_bench.protocol.stances import (ALL_STANCES, LOAD_STANCES, RANGE_STANCES, STANCES, commanded_soles,
+from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, commanded_soles,
                                           feasible_trajectory, fit_stance, load_protocol, place, posture_bounds)
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
@@ -107,10 +107,8 @@ class CollectSummary:
 def _segments(cfg: CollectConfig, rng: np.random.Generator, catalog: dict, stances: tuple[str, ...]):
     if cfg.standing_s > 0:
         yield "standing", "standing", "standing", cfg.standing_s, 0.0, 0.0
+    check_stance_names(stances, "stances", catalog)
     for s in stances:
-        if s not in catalog or s == "standing":
-            raise ConfigError(f"stance {s!r}: use stances from {list(STANCES)}, the load-varied {list(LOAD_STANCES)}, "
-                              f"the range stance {list(RANGE_STANCES)}, or a protocol file (--protocol)")
         yield f"stance_{s}", "stance", s, cfg.stance_s, cfg.jitter_m, cfg.jitter_rad
     # Held-out sessions are drawn from the stances being recorded (a robot that cannot
     # hold a lunge is not asked for one in its held-out sessions either).

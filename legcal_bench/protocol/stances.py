@@ -81,8 +81,8 @@ LOAD_STANCES: dict[str, Stance] = {
 # pelvis sways, so each pitch joint works far from the squats' angles (the knee ~0.2 rad
 # instead of ~1). In the squats a pitch joint's angle moves little about its mean, so its
 # encoder scale looks like its offset; with this stance the scale's price on the offsets'
-# posterior falls from ~1.7x to ~1.3x (A3-like, A2-like, G1; record --stances I II III IV
-# tall). No vertical sway: straight legs cannot lengthen.
+# posterior falls from 1.5-1.7x to 1.2-1.3x (A3-like, A2-like, G1: the effects table with
+# and without it; record --stances I II III IV tall). No vertical sway: straight legs cannot lengthen.
 RANGE_STANCES: dict[str, Stance] = {
     s.name: s
     for s in (
@@ -92,6 +92,18 @@ RANGE_STANCES: dict[str, Stance] = {
 }
 STANDING = Stance("standing", "straight-leg standing", depth=0.0, amplitude=(0.0,) * 6)
 ALL_STANCES = {**STANCES, **LOAD_STANCES, **RANGE_STANCES, "standing": STANDING}
+
+
+def check_stance_names(names, where: str = "--stances", catalog: dict | None = None) -> None:
+    """ConfigError naming the stances of `names` that are not recordable stances of
+    `catalog` (default: the built-ins; "standing" is recorded on its own), and the choices."""
+    from legcal_bench.errors import ConfigError
+
+    catalog = ALL_STANCES if catalog is None else catalog
+    bad = [s for s in names if s not in catalog or s == "standing"]
+    if bad:
+        raise ConfigError(f"{where}: {', '.join(f'stance {b!r}' for b in bad)} not known; use stances from {list(STANCES)}, the load-varied {list(LOAD_STANCES)}, "
+                          f"the range stance {list(RANGE_STANCES)}, or a protocol file (collect --protocol)")
 
 # Incommensurate periods (s) so no posture repeats within a stance.
 PERIODS = (11.0, 9.0, 7.0, 5.5, 8.5, 6.5)
