@@ -293,14 +293,25 @@ class InterFootCalibrator(Calibrator):
                                 f"{', '.join(c.recording for c in flagged)}, or re-record on a flat floor")
         t_contact = time.perf_counter() - t_contact
         t_gls = time.perf_counter()
-        gls = None
+        gls, gls_report = None, None
         if whitens(prep):  # generalized least squares from the row-weighted solution
             gls = refine(self, prep, ModelFit((), _effect_model(kin, (), problem.segments), dq, dq, (), None,
                                               problem.segments))
-            dq = gls.fit.x
-            if not gls.converged:
-                warnings.append(f"generalized least squares: not converged in {gls.steps} Gauss-Newton steps; the "
-                                "offsets are the last step's (the data may be far from the model: see diagnose)")
+            gls_report = {"steps": gls.steps, "converged": gls.converged, "chi2_per_dof": gls.chi2_per_dof,
+                          "used": gls.holds}
+            if not gls.holds:
+                warnings.append(
+                    f"generalized least squares: not used: the declared sensor noise explains the residual poorly "
+                    f"(whitened chi2/dof {gls.chi2_per_dof:.2f} > {GLS_MAX_CHI2_PER_DOF}; soles rocking on a real "
+                    "floor, or an effect the model lacks: `legcal-bench diagnose` traces it); the row-weighted fit "
+                    "is kept, its posterior from the row weights")
+                gls = None
+            else:
+                dq = gls.fit.x
+                if not gls.converged:
+                    warnings.append(f"generalized least squares: not converged in {gls.steps} Gauss-Newton steps; "
+                                    "the offsets are the last step's (the data may be far from the model: see "
+                                    "diagnose)")
         t_gls = time.perf_counter() - t_gls
 
         t2 = time.perf_counter()
@@ -348,8 +359,7 @@ class InterFootCalibrator(Calibrator):
                 "segments": {s.name: len(s.frames) for s in problem.segments},
                 "frames_used": int(sum(len(s.frames) for s in problem.segments)),
                 "cost": float(0.5 * r_final @ r_final),
-                "generalized_least_squares": None if gls is None else {"steps": gls.steps,
-                                                                       "converged": gls.converged},
+                "generalized_least_squares": gls_report,
                 "history_first_solve": hist1, "history_after_trim": hist2,
                 "pitch_signs": signs.tolist(),
                 "posterior": post if post is not None else {"note": NO_NOISE},
@@ -556,9 +566,13 @@ def fit_model(cal: InterFootCalibrator, prep: Prepared, effects=(), segments: li
 
 
 def _finish(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> ModelFit:
-    """The "sensor" setting's fit ends with the generalized least squares (`refine`);
-    the others are their weighted least squares as they stand."""
-    return refine(cal, prep, fit).fit if whitens(prep) else fit
+    """The "sensor" setting's fit ends with the generalized least squares (`refine`)
+    where the declared noise holds (`Refined.holds`); the others are their weighted
+    least squares as they stand."""
+    if not whitens(prep):
+        return fit
+    gls = refine(cal, prep, fit)
+    return gls.fit if gls.holds else fit
 
 
 def start_confounds(cal: InterFootCalibrator, prep: Prepared, model, dq0: np.ndarray,
@@ -708,18 +722,37 @@ def whitened_rows(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> tu
 
 REFINE_MAX_STEPS = 6
 REFINE_TOL = 1e-3  # converged when every step is below this fraction of its parameter's posterior std
+# The generalized least squares weighs every frame by its declared covariance, which is
+# right only while that noise model holds. When the data reject it by far (chi-square
+# per degree of freedom above this at the solution: the declared noise explains less
+# than 2/3 of the residual's variance), the row-weighted fit is kept: the frames the
+# whitening trusts most are those an unmodelled error spoils most. Measured on the full
+# suite's datasets (scratch, seeds 0-5, commit 932074a): weld sets 0.92-1.19 (A3-like,
+# A2-like, realistic sensors), where the whitened fit's offsets error is 0.9-1.6x
+# smaller; contact-floor sets 2.2-36 (soles rocking and sinking under load), where it is
+# 1.0-2.3x larger. A variance component shaped like the row weights, its scale fitted
+# to chi2/dof = 1, was tried and did not close the gap (A2-like contact: no better than
+# the whitened fit): the contact error is systematic with the posture, not extra noise.
+GLS_MAX_CHI2_PER_DOF = 1.5
 
 
 @dataclass
 class Refined:
     """The generalized least-squares fit (`refine`): the fit, the whitened Jacobian over
-    every column at it (the posterior's information), the Gauss-Newton steps taken and
-    whether they converged."""
+    every column at it (the posterior's information), the Gauss-Newton steps taken,
+    whether they converged and the whitened chi-square per degree of freedom left."""
 
     fit: ModelFit
     Jw: np.ndarray
     steps: int
     converged: bool
+    chi2_per_dof: float
+
+    @property
+    def holds(self) -> bool:
+        """Does the declared noise explain the residual well enough to weigh the frames by
+        it (`GLS_MAX_CHI2_PER_DOF`)?"""
+        return self.chi2_per_dof <= GLS_MAX_CHI2_PER_DOF
 
 
 def refine(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> Refined:
@@ -736,7 +769,7 @@ def refine(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> Refined:
     x = np.array(fit.x, dtype=float)
     converged = False
     for n_steps in range(1, REFINE_MAX_STEPS + 1):
-        z, Jw, _ = whitened_rows(cal, prep, replace(fit, x=x.copy(), q_ref=x[:12].copy()))
+        z, Jw, rank = whitened_rows(cal, prep, replace(fit, x=x.copy(), q_ref=x[:12].copy()))
         A = Jw[:, free]
         step = np.linalg.lstsq(A, z, rcond=None)[0]
         std = np.sqrt(np.diag(np.linalg.pinv(A.T @ A, hermitian=True)))
@@ -744,8 +777,10 @@ def refine(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit) -> Refined:
         if np.all(np.abs(step) <= REFINE_TOL * std):
             converged = True
             break
+    r = z - A @ step
+    dof = int(rank.sum()) - 6 * len(fit.segments) - len(free)
     x[:12] = np.clip(x[:12], -cal.bound, cal.bound)
-    return Refined(replace(fit, x=x, q_ref=x[:12].copy()), Jw, n_steps, converged)
+    return Refined(replace(fit, x=x, q_ref=x[:12].copy()), Jw, n_steps, converged, float(r @ r / max(dof, 1)))
 
 
 CONTACT_CHECKS = ("flag", "drop", "off")

@@ -2,8 +2,9 @@
 if not, where does the residual live, and which effect of the library is missing, or
 none ("unexplained").
 
-Detection. The declared noise model, carried to each frame's residual
-(`legcal_bench.estimation.whitening`), whitens it; for a model that explains the data
+Detection. The noise model, carried to each frame's residual
+(`legcal_bench.estimation.whitening`), whitens it (the declared encoder noise; the IMU
+tilt noise declared or, when larger, measured from the data: `tilt_noise`); for a model that explains the data
 the whitened chi-square is chi2(dof), dof = sum of the frames' ranks - 6 per segment
 (the inter-foot means) - the free parameters. Each fit's chi-square is taken after one
 Gauss-Newton step of the whitened problem from that fit (the `sensor` setting's fit ends
@@ -46,6 +47,7 @@ from legcal_bench.estimation.effects import joint_loads, load_effects, registry
 from legcal_bench.estimation.lineartests import basis, chi2_after, score
 from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
+from legcal_bench.estimation.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
 from legcal_bench.robots.legmap import SIDES
@@ -101,6 +103,7 @@ class Context:
     # How well tracing's columns are known (`lineartests.score`): the largest angular
     # noise of a frame's residual rows (rad), the inter-foot rotation or a sole normal.
     resolution: float = 0.0
+    noise: dict = field(default_factory=dict)  # the noise model judged against (report)
 
 
 def _free_columns(fit) -> list[int]:
@@ -159,8 +162,13 @@ def context(cal, robot, recordings) -> Context:
                                "accel_noise_std); a residual cannot be judged against noise nobody declared")
     held = [r for r in recordings if r.kind == "heldout"]
     heldout, _ = cal.segments_of(prep.kin, held) if held else ([], [])
-    return Context(cal, prep, sig["encoder"], sig["tilt"], heldout, {r.name: r for r in recordings},
-                   max(sig["feet_rotation"], sig["flat_normal"]))
+    # The IMU vertical's noise: the declared, or what the data show when more (`tilt_noise`).
+    measured = measured_tilt_noise(prep.kin, prep.stances)
+    sigma_t = sig["tilt"] if measured is None else max(sig["tilt"], measured)
+    noise = {"encoder_rad": sig["encoder"], "tilt_declared_rad": sig["tilt"], "tilt_measured_rad": measured,
+             "tilt_used_rad": sigma_t}
+    return Context(cal, prep, sig["encoder"], sigma_t, heldout, {r.name: r for r in recordings},
+                   max(sig["feet_rotation"], sig["flat_normal"]), noise)
 
 
 def _offsets_sigma(ev: Evaluated) -> np.ndarray:
@@ -334,6 +342,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
         "detection": detection,
         "after": after,
         "alpha": ALPHA,
+        "noise": ctx.noise,
         "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,
                   "ambiguous_bic": AMBIGUOUS_BIC, "max_effects": MAX_EFFECTS,
                   "poor_fit": "residual left significant and a leg or IMU location test on it at family-wise alpha"},

@@ -122,6 +122,12 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
         L.append(f"| held-out foot height RMS ({hh['postures']} postures, mm) | {hh['before']:.4f} | "
                  f"{hh['after']:.4f} |")
     L += ["", f"Decision rules: {report['rules']}; detection at alpha = {report['alpha']}.", ""]
+    nz = report.get("noise")
+    if nz:
+        meas = "–" if nz["tilt_measured_rad"] is None else f"{nz['tilt_measured_rad'] * 1e3:.3f}"
+        L += [f"Judged against: encoder noise {np.rad2deg(nz['encoder_rad']):.4f} deg; IMU tilt noise "
+              f"{nz['tilt_used_rad'] * 1e3:.3f} mrad per axis (declared {nz['tilt_declared_rad'] * 1e3:.3f}, "
+              f"measured from the data {meas}: the larger is used).", ""]
     if report["parameters"]:
         L += ["| parameter | value | std | unit |", "|---|---|---|---|"]
         for n, p in report["parameters"].items():

@@ -117,3 +117,24 @@ def test_the_sensor_setting_ends_with_the_generalized_least_squares_and_its_post
     # 36 offsets: the mean z^2 of a right posterior lies in [0.54, 1.57] 95 % of the time.
     assert 0.4 < np.mean(z2) < 2.0, np.mean(z2)
     assert sq_gls < 0.5 * sq_rows, (sq_gls, sq_rows)
+
+
+def test_the_generalized_least_squares_is_not_used_where_the_declared_noise_is_rejected(tmp_path_factory):
+    """Frames weighed by a noise model the data reject: the fit keeps the row-weighted
+    solution and says why. Here the recordings declare half their true noise (chi2/dof
+    about 4); declared right, the same data give chi2/dof about 1 and the whitened fit."""
+    from dataclasses import replace
+
+    lm, recs, _ = _session(tmp_path_factory, "a3", mode="kinematic", sensors="calibrated-imu", seed=0)
+    right = get_calibrator("interfoot", setting="sensor").calibrate(lm, recs)
+    gls = right.diagnostics["generalized_least_squares"]
+    assert gls["used"] and 0.9 < gls["chi2_per_dof"] < 1.1, gls
+    for r in recs:
+        m = r.sensor_model
+        r.sensor_model = replace(m, encoder_noise_std=m.encoder_noise_std / 2, encoder_resolution=m.encoder_resolution / 2,
+                                 accel_noise_std=m.accel_noise_std / 2)
+    wrong = get_calibrator("interfoot", setting="sensor").calibrate(lm, recs)
+    gls = wrong.diagnostics["generalized_least_squares"]
+    assert not gls["used"] and 3.5 < gls["chi2_per_dof"] < 4.5, gls
+    assert np.allclose(wrong.offsets_vector(lm.joint_names), wrong.diagnostics["history_after_trim"][-1])
+    assert any("generalized least squares: not used" in w and "chi2/dof" in w for w in wrong.warnings)

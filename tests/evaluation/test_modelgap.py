@@ -24,6 +24,11 @@ def test_clean_data_are_explained_by_the_offsets(tmp_path):
     gap = rep["detection"]["heldout"]  # held-out over training chi2/dof, tested against F
     assert abs(gap["ratio_to_training"] - 1) < 0.05 and gap["p_value"] > 0.005
     assert rep["steps"] == [] and any("selection not run" in n for n in rep["notes"])  # nothing to explain
+    # The IMU tilt noise measured from the data (A3-like weld: the compensation leaves
+    # ~nothing, reports/modelgap/tilt_scatter.md); the larger of it and the declared is used.
+    nz = rep["noise"]
+    assert abs(nz["tilt_measured_rad"] / nz["tilt_declared_rad"] - 1) < 0.03, nz
+    assert nz["tilt_used_rad"] == max(nz["tilt_measured_rad"], nz["tilt_declared_rad"])
     # IMU pitch on a pitch-first hip: reported as confounded, computed.
     assert any("hip_pitch" in c["offsets"] and c["effect"] == "imu_tilt" for c in rep["confounded"])
 
