@@ -88,21 +88,21 @@ def outside_spec(name: str, seed: int, scale: float = 1.0) -> tuple[str, str]:
     return OUTSIDE[name].format(side=side, size=OUTSIDE_SIZE[name] * scale), side
 
 
-def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: str = "weld"):
+def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: str = "weld", stances=None):
     from legcal_bench.data.recording import list_segments, load_session, load_truth
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
 
     legmap = load_robot(robot)
     cfg = CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed,
-                        effects=tuple(specs))
+                        effects=tuple(specs), **({"stances": tuple(stances)} if stances else {}))
     collect(cfg, work / "set", progress=False)
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 
 
-def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
+def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None) -> dict:
     """One diagnosed session set; `kind` clean | library | near | multi | outside |
-    reference."""
+    reference; `stances` recorded (default: the paper's four)."""
     from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
@@ -122,7 +122,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int) -> dict:
     cal = get_calibrator("interfoot", setting="sensor")
     with tempfile.TemporaryDirectory(prefix="legcal_modelgap_") as work:
         mode = "kinematic" if kind == "clean_kinematic" else "weld"
-        legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode)
+        legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode, stances)
         row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name,
                "spec": " ".join(specs) or None, "seed": seed, "side": side, "scale": scale, "mode": mode}
         if kind == "reference":
@@ -174,22 +174,27 @@ def _case(args):
 
 
 def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int, near_seeds: int = 0,
-         multi_seeds: int = 0) -> list[tuple]:
-    out = [(r, kind, None, s) for r in robots for kind in ("clean", "clean_kinematic") for s in range(clean_seeds)]
-    out += [(r, "library", e, s) for r in robots for e in LIBRARY for s in range(seeds)]
-    out += [(r, "near", e, 1000 + s) for r in robots for e in LIBRARY for s in range(near_seeds)]
-    out += [(r, "multi", None, 2000 + s) for r in robots for s in range(multi_seeds)]
-    out += [(r, "reference", o, s) for r in outside_robots for o in OUTSIDE for s in range(2)]
-    out += [(r, "outside", o, s) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
+         multi_seeds: int = 0, stances=None) -> list[tuple]:
+    st = None if stances is None else tuple(stances)
+    out = [(r, kind, None, s, st) for r in robots for kind in ("clean", "clean_kinematic")
+           for s in range(clean_seeds)]
+    out += [(r, "library", e, s, st) for r in robots for e in LIBRARY for s in range(seeds)]
+    out += [(r, "near", e, 1000 + s, st) for r in robots for e in LIBRARY for s in range(near_seeds)]
+    out += [(r, "multi", None, 2000 + s, st) for r in robots for s in range(multi_seeds)]
+    out += [(r, "reference", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(2)]
+    out += [(r, "outside", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
     return out
 
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_ROBOTS, outside_seeds: int = 10,
-        near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True) -> dict:
+        near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True,
+        stances=None) -> dict:
+    """Every case (`jobs`) diagnosed; `seeds` per library effect, the other counts as
+    named; `stances` recorded in every case (default: the paper's four)."""
     from legcal_bench.files.parallel import map_with_progress
 
     todo = jobs(robots, seeds, clean_seeds, [r for r in outside_robots if r in robots], outside_seeds, near_seeds,
-                multi_seeds)
+                multi_seeds, stances)
     rows = map_with_progress(_case, todo, workers, "modelgap", progress)
     return {"rows": rows, "summary": summarize(rows)}
 

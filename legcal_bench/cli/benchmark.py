@@ -15,8 +15,12 @@ def cmd_bench(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark.leaderboard import generate
     from legcal_bench.benchmark.runner import run
     from legcal_bench.benchmark.suites import get_suite
+    from legcal_bench.errors import ConfigError
 
     suite = get_suite(a.suite)
+    if "modelgap" not in suite.tags and a.effect_seeds:
+        raise ConfigError(f"--effect-seeds: the modelgap suite's option (seeds per library effect), not {a.suite!r}'s; "
+                          "use --seeds")
     if "closed_loop" in suite.tags:
         return _bench_closed_loop(a, suite)
     if "modelgap" in suite.tags:
@@ -99,11 +103,9 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
     if a.mjcf is not None:
         out["mjcf"] = a.mjcf
     if a.stances is not None:
-        from legcal_bench.protocol.stances import STANCES
+        from legcal_bench.protocol.stances import check_stance_names
 
-        unknown = [s for s in a.stances if s not in STANCES]
-        if unknown:
-            raise ConfigError(f"--stances {unknown}: use stances from {list(STANCES)}")
+        check_stance_names(a.stances)
         out["stances"] = tuple(a.stances)
     if a.sensors is not None:
         from legcal_bench.sim.sensors import sim_sensors
@@ -132,7 +134,8 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
                         + (" ".join(default) if default else "the suite's") + ")")
     p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names")
     p.add_argument("--stances", nargs="+", default=None,
-                   help="stances to record, as in collect (default: I II III IV); held-out sessions follow them")
+                   help="stances to record, as in collect (default: I II III IV; e.g. I II III IV tall, the range "
+                        "stance that separates a knee encoder scale); held-out sessions follow them")
     p.add_argument("--sensors", default=None, help="sensor preset, as in collect (default: the suite's, realistic)")
     p.add_argument("--period-scale", type=float, default=None,
                    help="slower posture motion, as in collect (default 1; stance seconds are not scaled with it)")
@@ -174,6 +177,7 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     from legcal_bench.benchmark.modelgap import RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
     from legcal_bench.files.reports import write_report
+    from legcal_bench.protocol.stances import check_stance_names
     from legcal_bench.provenance import code_version, describe
 
     robots = []
@@ -184,12 +188,16 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
         else:
             robots.append(r)
     seeds = a.seeds or suite.seeds
-    made_by = f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
+    effect_seeds = a.effect_seeds or seeds
+    if a.stances:
+        check_stance_names(a.stances)
+    made_by = (f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
+               + (f" --effect-seeds {effect_seeds}" if a.effect_seeds else "")
+               + (f" --stances {' '.join(a.stances)}" if a.stances else ""))
     code = code_version()
     t0 = time.perf_counter()
-    data = run(robots, seeds=seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds, multi_seeds=seeds,
-               workers=a.workers,
-               progress=not a.quiet)
+    data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
+               multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
@@ -210,6 +218,9 @@ def add_commands(sub) -> None:
     bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes")
     bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds (closed-loop: "
                                                              "trials)")
+    bn.add_argument("--effect-seeds", type=int, default=None,
+                    help="modelgap suite: seeds per library effect (default --seeds; clean sets are 2x --seeds, the "
+                         "near-threshold, multi-effect and outside cases --seeds each)")
     bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")

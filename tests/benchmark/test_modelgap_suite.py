@@ -4,7 +4,7 @@ was not injected as a confident wrong attribution."""
 
 import pytest
 
-from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, library_spec, multi_effects,
+from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, jobs, library_spec, multi_effects,
                                              multi_specs, near_scale, summarize)
 from legcal_bench.sim.effects import parse_effect
 
@@ -22,6 +22,15 @@ def test_cases_draw_valid_seeded_specs():
     assert float(tenth.split("=")[1]) == pytest.approx(0.1 * float(full.split("=")[1]), rel=1e-3)
     k_full = float(library_spec("compliance", 4).split("k=")[1])
     assert float(library_spec("compliance", 4, 0.5).split("k=")[1]) == pytest.approx(2 * k_full, abs=1)
+
+
+def test_every_case_records_the_stances_asked_and_each_kind_its_seeds():
+    todo = jobs(["a3"], 20, 4, ["a3"], 3, 2, 1, stances=["I", "II", "III", "IV", "tall"])
+    assert {j[4] for j in todo} == {("I", "II", "III", "IV", "tall")}
+    kinds = [j[1] for j in todo]
+    assert kinds.count("library") == 20 * len(LIBRARY) and kinds.count("clean") == 4
+    assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1 and kinds.count("outside") == 9
+    assert {j[4] for j in jobs(["a3"], 1, 1, [], 0)} == {None}
 
 
 def _row(kind, name, selected, verdict="selected", seed=0, **kw):

@@ -40,6 +40,10 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys):
     assert "random:<deg>" in capsys.readouterr().err
     assert main(["collect", "--stances", "V", "--out", str(tmp_path), "--quiet"]) == 2
     assert "stance 'V'" in capsys.readouterr().err
+    assert main(["bench", "--suite", "smoke", "--stances", "I", "V", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "stance 'V'" in capsys.readouterr().err
+    assert main(["bench", "--suite", "smoke", "--effect-seeds", "20", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "--effect-seeds: the modelgap suite's option" in capsys.readouterr().err
 
 
 def test_info_lists_joint_order_and_axes(capsys):
