@@ -730,9 +730,10 @@ REFINE_TOL = 1e-3  # converged when every step is below this fraction of its par
 # suite's datasets (`reports/gls/gls_holds.py`, seeds 0-5, three robots): chi2/dof
 # 0.92-1.19 on every weld set, where the row-weighted fit's offsets error is 0.93-1.6x
 # the whitened fit's (A2-like 1.1-1.6x); 2.2-129 on every contact set (soles rocking and
-# sinking under load), where the whitened fit's is 1.0-2.7x the row-weighted's. A variance component
-# shaped like the row weights, its scale fitted to chi2/dof = 1, was tried (scratch) and
-# did not close the gap: the contact error is systematic with the posture, not noise.
+# sinking under load), where the whitened fit's is 1.0-2.7x the row-weighted's. A
+# variance component shaped like the row weights, its scale fitted to chi2/dof = 1, was
+# tried (scratch) and did not close the gap: the contact error is systematic with the
+# posture, not noise.
 GLS_MAX_CHI2_PER_DOF = 1.5
 
 
