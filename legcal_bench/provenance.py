@@ -34,8 +34,9 @@ from typing import Any
 # 6 = the inter-foot `sensor` setting ends with generalized least squares (every frame
 #     whitened by its declared covariance) and its posterior is that fit's information
 #     (issue #16): clean A3-like offsets error 2-3x lower.
-# 7 = ... where the declared noise holds (whitened chi2/dof <= 1.5); where the data reject
-#     it (contact floors: 2-130) the row-weighted fit of version 5 is kept.
+# 7 = the `sensor` setting's generalized least squares only where the declared noise
+#     holds (whitened chi2/dof <= 1.5); where the data reject it (contact floors: 2.2-129)
+#     the row-weighted fit of version 5 is kept.
 RESULTS_VERSION = 7
 PACKAGE = "legcal-bench"
 

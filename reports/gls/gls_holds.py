@@ -47,7 +47,9 @@ def main(robots: list[str]) -> None:
                     truth = load_truth(list_segments(out)[0]).offsets
                 cal = get_calibrator("interfoot", setting="sensor")
                 prep = cal.prepare(lm, recs)
-                rows = fit_model(cal, replace(prep, setting_name="rows"))  # the row-weighted fit, not refined
+                # The row-weighted fit as the setting starts it: `fit_model` refines only when
+                # `whitens(prep)` (the "sensor" setting), so any other name stops it there.
+                rows = fit_model(cal, replace(prep, setting_name="row-weighted"))
                 gls = refine(cal, prep, rows)
                 err = [float(np.rad2deg(np.sqrt(np.mean((x[:12] - truth) ** 2)))) for x in (gls.fit.x, rows.x)]
                 print(f"| {lm.name} | {mode} | {seed} | {gls.chi2_per_dof:.3f} | {err[0]:.4f} | {err[1]:.4f} | "
