@@ -7,10 +7,10 @@ Detection. The noise model, carried to each frame's residual
 tilt noise declared or, when larger, measured from the data: `tilt_noise`); for a model
 that explains the data the whitened chi-square is chi2(dof), dof = sum of the frames'
 ranks - 6 per segment (the inter-foot means) - the free parameters. Each fit's
-chi-square is taken after one Gauss-Newton step of the whitened problem from that fit (the `sensor` setting's fit ends
-at that problem's optimum, where the step is ~0; a row-weighted fit of another setting
-is brought there, which makes models comparable). Tests,
-each at ALPHA / 2: the training chi-square against chi2(dof), and the gap between the
+chi-square is taken after one Gauss-Newton step of the whitened problem from that fit
+(the `sensor` setting's fit ends at that problem's optimum where the declared noise
+holds, and the step is ~0; a row-weighted fit is brought there, which makes models
+comparable). Tests, each at ALPHA / 2: the training chi-square against chi2(dof), and the gap between the
 held-out sessions' chi-square per dof (at the training estimate) and the training's,
 against F (`_gap`).
 
