@@ -10,9 +10,9 @@ ranks - 6 per segment (the inter-foot means) - the free parameters. Each fit's
 chi-square is taken after one Gauss-Newton step of the whitened problem from that fit
 (the `sensor` setting's fit ends at that problem's optimum where the declared noise
 holds, and the step is ~0; a row-weighted fit is brought there, which makes models
-comparable). Tests, each at ALPHA / 2: the training chi-square against chi2(dof), and the gap between the
-held-out sessions' chi-square per dof (at the training estimate) and the training's,
-against F (`_gap`).
+comparable). Tests, each at ALPHA / 2: the training chi-square against chi2(dof), and
+the gap between the held-out sessions' chi-square per dof (at the training estimate)
+and the training's, against F (`_gap`).
 
 Selection, run only when a detection test fires, greedy and nested (at most
 MAX_EFFECTS): each library effect is fitted on
