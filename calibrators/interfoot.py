@@ -693,13 +693,15 @@ def frame_residuals(cal: InterFootCalibrator, prep: Prepared, fit: ModelFit, seg
                           np.concatenate(seg_idx), np.concatenate(rec), np.concatenate(q), np.concatenate(tix))
 
 
-def declared_noise(prep: Prepared) -> dict:
-    """The recordings' declared noise (`noise_sigmas`); raises when they declare none."""
+def declared_noise(prep: Prepared,
+                   needed_by: str = "the generalized least squares, the posterior and the confound report need it"
+                   ) -> dict:
+    """The recordings' declared noise (`noise_sigmas`); raises when they declare none,
+    saying what `needed_by` it."""
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
     if sig is None:
         raise CalibrationError("the recordings declare no sensor noise (sensor_model.encoder_noise_std, "
-                               "accel_noise_std): the generalized least squares, the posterior and the confound "
-                               "report need it")
+                               f"accel_noise_std): {needed_by}")
     return sig
 
 

@@ -42,10 +42,8 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
 
-from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.effects import joint_loads, load_effects, registry
 from legcal_bench.estimation.lineartests import basis, chi2_after, score
-from legcal_bench.estimation.noise import noise_sigmas
 from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
 from legcal_bench.estimation.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
@@ -155,11 +153,11 @@ def _fires(tests: dict) -> bool:
 
 
 def context(cal, robot, recordings) -> Context:
+    from legcal_bench.calibrators.interfoot import declared_noise
+
     prep = cal.prepare(robot, recordings)
-    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
-    if sig is None:
-        raise CalibrationError("diagnose: the recordings declare no sensor noise (sensor_model.encoder_noise_std, "
-                               "accel_noise_std); a residual cannot be judged against noise nobody declared")
+    sig = declared_noise(prep, "diagnose cannot judge a residual against noise nobody declared; record with "
+                               "--sensors realistic or calibrated-imu")
     held = [r for r in recordings if r.kind == "heldout"]
     heldout, _ = cal.segments_of(prep.kin, held) if held else ([], [])
     # The IMU vertical's noise: the declared, or what the data show when more (`tilt_noise`).

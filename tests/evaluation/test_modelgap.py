@@ -48,6 +48,17 @@ def test_a_shank_bent_sideways_is_unexplained_on_the_right_leg(tmp_path):
     assert rep["offsets_rad"] == rep["offsets_only_rad"]  # nothing kept: the offsets-only estimate stands
 
 
+def test_diagnose_refuses_recordings_that_declare_no_noise(tmp_path):
+    import pytest
+
+    from legcal_bench.errors import CalibrationError
+
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="weld", sensors="zero", seed=0), tmp_path / "set", progress=False)
+    with pytest.raises(CalibrationError, match=r"encoder_noise_std.*diagnose.*--sensors realistic"):
+        diagnose(get_calibrator("interfoot", setting="sensor"), lm, load_session(tmp_path / "set", robot=lm))
+
+
 def test_diagnose_cli_errors_name_the_fix(tmp_path, capsys):
     from legcal_bench.cli import main
 
