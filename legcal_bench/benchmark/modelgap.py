@@ -25,9 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.errors import ConfigError
 from legcal_bench.evaluation.modelgap import ALPHA
 
 RESULTS_NAME = "modelgap"  # its folder and files under the leaderboard root
+CASES = ("clean", "library", "near", "multi", "outside")  # `bench --cases`: clean takes
+# its kinematic floor along, outside its reference runs
 LIBRARY = ("imu_tilt", "leg_length", "encoder_scale", "compliance", "hip_axis")
 OUTSIDE = {
     "shank_bent": "link_offset:link={side}_shank,axis=y,mm={size}",
@@ -174,7 +177,12 @@ def _case(args):
 
 
 def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int, near_seeds: int = 0,
-         multi_seeds: int = 0, stances=None) -> list[tuple]:
+         multi_seeds: int = 0, stances=None, cases=CASES) -> list[tuple]:
+    """(robot, kind, name, seed, stances) of every case of the groups in `cases`."""
+    unknown = sorted(set(cases) - set(CASES))
+    if unknown:
+        raise ConfigError(f"--cases: {', '.join(unknown)} unknown; the model-gap suite's cases are "
+                          f"{', '.join(CASES)}")
     st = None if stances is None else tuple(stances)
     out = [(r, kind, None, s, st) for r in robots for kind in ("clean", "clean_kinematic")
            for s in range(clean_seeds)]
@@ -183,18 +191,20 @@ def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: in
     out += [(r, "multi", None, 2000 + s, st) for r in robots for s in range(multi_seeds)]
     out += [(r, "reference", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(2)]
     out += [(r, "outside", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
-    return out
+    group = {"clean_kinematic": "clean", "reference": "outside"}
+    return [j for j in out if group.get(j[1], j[1]) in cases]
 
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_ROBOTS, outside_seeds: int = 10,
         near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True,
-        stances=None) -> dict:
-    """Every case (`jobs`) diagnosed; `seeds` per library effect, the other counts as
-    named; `stances` recorded in every case (default: the paper's four)."""
+        stances=None, cases=CASES) -> dict:
+    """Every case (`jobs`) of the groups in `cases` diagnosed; `seeds` per library
+    effect, the other counts as named; `stances` recorded in every case (default: the
+    paper's four)."""
     from legcal_bench.files.parallel import map_with_progress
 
     todo = jobs(robots, seeds, clean_seeds, [r for r in outside_robots if r in robots], outside_seeds, near_seeds,
-                multi_seeds, stances)
+                multi_seeds, stances, cases)
     rows = map_with_progress(_case, todo, workers, "modelgap", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
@@ -288,6 +298,11 @@ def _recommended(r: dict) -> float:
     return r["offsets_rms_deg"]["after"] if r["selected"] else r["offsets_rms_deg"]["before"]
 
 
+def _cell(x, nd: int) -> str:
+    """A table number, or "–" where there is none (no clean floor among the cases run)."""
+    return "–" if x is None or x != x else f"{x:.{nd}f}"
+
+
 def _mean_max(v) -> dict:
     return {"mean": float(np.mean(v)), "max": float(np.max(v))}
 
@@ -323,8 +338,8 @@ def markdown(data: dict, made_by: str, code: str) -> str:
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']}/{s['seeds']} | "
                      f"{s['effects_selected_right']}/{s['effects_injected']} injected effects selected | "
                      f"{s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | {s['offsets_rms_deg_after']:.4f} | "
-                     f"{s['floor_offsets_rms_deg']:.4f} | "
-                     f"{s['offsets_rms_deg_after'] / s['floor_offsets_rms_deg']:.2f} | {v} |")
+                     f"{_cell(s['floor_offsets_rms_deg'], 4)} | "
+                     f"{_cell(s['offsets_rms_deg_after'] / s['floor_offsets_rms_deg'], 2)} | {v} |")
         elif s["case"].startswith("outside"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['unexplained']} unexplained | "
                      f"{s['unexplained_leg_and_channel']}/{s['seeds']} with leg and channel (leg {s['leg_correct']}, "
@@ -333,6 +348,6 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         else:
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']}/{s['seeds']} | "
                      f"{s['correct']}/{s['seeds']} | {s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | "
-                     f"{s['offsets_rms_deg_after']:.4f} | {s['floor_offsets_rms_deg']:.4f} | "
-                     f"{s['after_over_floor']:.2f} | {v} |")
+                     f"{s['offsets_rms_deg_after']:.4f} | {_cell(s['floor_offsets_rms_deg'], 4)} | "
+                     f"{_cell(s['after_over_floor'], 2)} | {v} |")
     return "\n".join(L) + "\n"

@@ -21,6 +21,8 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if "modelgap" not in suite.tags and a.effect_seeds:
         raise ConfigError(f"--effect-seeds: the modelgap suite's option (seeds per library effect), not {a.suite!r}'s; "
                           "use --seeds")
+    if "modelgap" not in suite.tags and a.cases:
+        raise ConfigError(f"--cases: the modelgap suite's option (which of its case groups to run), not {a.suite!r}'s")
     if "closed_loop" in suite.tags:
         return _bench_closed_loop(a, suite)
     if "modelgap" in suite.tags:
@@ -174,7 +176,7 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.modelgap import RESULTS_NAME, markdown, run
+    from legcal_bench.benchmark.modelgap import CASES, RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
     from legcal_bench.files.reports import write_report
     from legcal_bench.protocol.stances import check_stance_names
@@ -193,11 +195,13 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
         check_stance_names(a.stances)
     made_by = (f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
                + (f" --effect-seeds {effect_seeds}" if a.effect_seeds else "")
-               + (f" --stances {' '.join(a.stances)}" if a.stances else ""))
+               + (f" --stances {' '.join(a.stances)}" if a.stances else "")
+               + (f" --cases {' '.join(a.cases)}" if a.cases else ""))
     code = code_version()
     t0 = time.perf_counter()
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
-               multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances)
+               multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
+               cases=tuple(a.cases or CASES))
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
@@ -221,6 +225,10 @@ def add_commands(sub) -> None:
     bn.add_argument("--effect-seeds", type=int, default=None,
                     help="modelgap suite: seeds per library effect (default --seeds; clean sets are 2x --seeds, the "
                          "near-threshold, multi-effect and outside cases --seeds each)")
+    bn.add_argument("--cases", nargs="+", default=None,
+                    help="modelgap suite: only these case groups, of clean (with the kinematic floor), library, near, "
+                         "multi, outside (with its reference runs); default all (e.g. --cases clean library "
+                         "--effect-seeds 20: the library effects with more seeds, beside their floor)")
     bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")

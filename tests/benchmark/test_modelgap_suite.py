@@ -4,8 +4,9 @@ was not injected as a confident wrong attribution."""
 
 import pytest
 
-from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, jobs, library_spec, multi_effects,
-                                             multi_specs, near_scale, summarize)
+from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, jobs, library_spec, markdown,
+                                             multi_effects, multi_specs, near_scale, summarize)
+from legcal_bench.errors import ConfigError
 from legcal_bench.sim.effects import parse_effect
 
 
@@ -31,6 +32,20 @@ def test_every_case_records_the_stances_asked_and_each_kind_its_seeds():
     assert kinds.count("library") == 20 * len(LIBRARY) and kinds.count("clean") == 4
     assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1 and kinds.count("outside") == 9
     assert {j[4] for j in jobs(["a3"], 1, 1, [], 0)} == {None}
+
+
+def test_cases_run_only_the_groups_asked_each_with_its_companions():
+    todo = jobs(["a3"], 20, 4, ["a3"], 3, 2, 1, cases=("clean", "library"))
+    kinds = [j[1] for j in todo]
+    assert set(kinds) == {"clean", "clean_kinematic", "library"} and kinds.count("library") == 20 * len(LIBRARY)
+    assert {j[1] for j in jobs(["a3"], 1, 1, ["a3"], 1, cases=("outside",))} == {"outside", "reference"}
+    with pytest.raises(ConfigError, match="--cases: librari unknown.*clean, library, near, multi, outside"):
+        jobs(["a3"], 1, 1, [], 0, cases=("librari",))
+    # Without the clean cases there is no floor: the table says so instead of printing nan.
+    md = markdown({"summary": summarize([_row("library", "imu_tilt", ["imu_tilt"]),
+                                         _row("multi", "imu_tilt+leg_length+hip_axis", ["imu_tilt"])])}, "m", "c")
+    assert "nan" not in md
+    assert "| r | imu_tilt | 1 | 1/1 | 1/1 | 0 | 0.1000 | 0.0200 | – | – | selected 1 |" in md
 
 
 def _row(kind, name, selected, verdict="selected", seed=0, **kw):

@@ -44,6 +44,8 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys):
     assert "stance 'V'" in capsys.readouterr().err
     assert main(["bench", "--suite", "smoke", "--effect-seeds", "20", "--out", str(tmp_path), "--quiet"]) == 2
     assert "--effect-seeds: the modelgap suite's option" in capsys.readouterr().err
+    assert main(["bench", "--suite", "smoke", "--cases", "library", "--out", str(tmp_path), "--quiet"]) == 2
+    assert "--cases: the modelgap suite's option" in capsys.readouterr().err
 
 
 def test_info_lists_joint_order_and_axes(capsys):
