@@ -21,8 +21,9 @@ def cmd_bench(a: argparse.Namespace) -> int:
     if "modelgap" not in suite.tags and a.effect_seeds:
         raise ConfigError(f"--effect-seeds: the modelgap suite's option (seeds per library effect), not {a.suite!r}'s; "
                           "use --seeds")
-    if "modelgap" not in suite.tags and a.cases:
-        raise ConfigError(f"--cases: the modelgap suite's option (which of its case groups to run), not {a.suite!r}'s")
+    for opt, val in (("--cases", a.cases), ("--outside-robots", a.outside_robots)):
+        if "modelgap" not in suite.tags and val:
+            raise ConfigError(f"{opt}: the modelgap suite's option, not {a.suite!r}'s")
     if "closed_loop" in suite.tags:
         return _bench_closed_loop(a, suite)
     if "modelgap" in suite.tags:
@@ -176,8 +177,9 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.modelgap import CASES, RESULTS_NAME, markdown, run
+    from legcal_bench.benchmark.modelgap import CASES, OUTSIDE_ROBOTS, RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
+    from legcal_bench.errors import ConfigError
     from legcal_bench.files.reports import write_report
     from legcal_bench.protocol.stances import check_stance_names
     from legcal_bench.provenance import code_version, describe
@@ -193,15 +195,21 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     effect_seeds = a.effect_seeds or seeds
     if a.stances:
         check_stance_names(a.stances)
+    if a.outside_robots:
+        stray = [r for r in a.outside_robots if r not in robots]
+        if stray:
+            raise ConfigError(f"--outside-robots: {', '.join(stray)} not among the robots run ({', '.join(robots)}); "
+                              "give each in --robots too")
     made_by = (f"legcal-bench bench --suite modelgap --robots {' '.join(robots)} --seeds {seeds}"
                + (f" --effect-seeds {effect_seeds}" if a.effect_seeds else "")
                + (f" --stances {' '.join(a.stances)}" if a.stances else "")
-               + (f" --cases {' '.join(a.cases)}" if a.cases else ""))
+               + (f" --cases {' '.join(a.cases)}" if a.cases else "")
+               + (f" --outside-robots {' '.join(a.outside_robots)}" if a.outside_robots else ""))
     code = code_version()
     t0 = time.perf_counter()
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
                multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
-               cases=tuple(a.cases or CASES))
+               cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots or OUTSIDE_ROBOTS))
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
@@ -229,6 +237,9 @@ def add_commands(sub) -> None:
                     help="modelgap suite: only these case groups, of clean (with the kinematic floor), library, near, "
                          "multi, outside (with its reference runs); default all (e.g. --cases clean library "
                          "--effect-seeds 20: the library effects with more seeds, beside their floor)")
+    bn.add_argument("--outside-robots", nargs="+", default=None,
+                    help="modelgap suite: the robots (of --robots) the edits outside the library run on (default a3: "
+                         "~35 s a diagnosis)")
     bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")

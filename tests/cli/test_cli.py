@@ -46,6 +46,9 @@ def test_bad_inputs_exit_2_with_a_message(tmp_path, capsys):
     assert "--effect-seeds: the modelgap suite's option" in capsys.readouterr().err
     assert main(["bench", "--suite", "smoke", "--cases", "library", "--out", str(tmp_path), "--quiet"]) == 2
     assert "--cases: the modelgap suite's option" in capsys.readouterr().err
+    assert main(["bench", "--suite", "modelgap", "--robots", "a3", "--outside-robots", "a2", "--out", str(tmp_path),
+                 "--quiet"]) == 2
+    assert "--outside-robots: a2 not among the robots run (a3)" in capsys.readouterr().err
 
 
 def test_info_lists_joint_order_and_axes(capsys):
