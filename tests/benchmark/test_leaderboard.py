@@ -33,6 +33,19 @@ def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
             assert f"| {row} |" in section.split("## ")[1]
 
 
+def test_every_other_model_gap_root_regenerates_byte_identically(tmp_path):
+    """Model-gap runs kept beside the main one (e.g. a `--cases clean library` run with
+    more seeds per effect): each root's README and page are what its rows generate."""
+    for rows in sorted(LEADERBOARD.glob("*/modelgap/modelgap.json")):
+        root = rows.parents[1]
+        (tmp_path / root.name / "modelgap").mkdir(parents=True)
+        shutil.copy(rows, tmp_path / root.name / "modelgap")
+        assert generate(tmp_path / root.name) == (root / "README.md").read_text(), root.name
+        for name in ("modelgap.md", "modelgap.json"):
+            assert ((tmp_path / root.name / "modelgap" / name).read_text()
+                    == (root / "modelgap" / name).read_text()), (root.name, name)
+
+
 def test_beats_zero_counts_seeds_on_the_same_sessions():
     from legcal_bench.benchmark.leaderboard import _beats_baseline
 
