@@ -5,6 +5,17 @@ errors, paper, provenance, files -> geometry -> robots -> sim -> data -> protoco
 estimation -> calibrators -> envs -> policies -> evaluation -> benchmark -> reports -> cli.
 """
 
-from legcal_bench.provenance import package_version
+import os
+import platform
+
+# One floating point on every x86-64 machine: OpenBLAS picks its kernels by CPU (AVX-512
+# ones on newer Xeons, Haswell/AVX2 ones before), which moves the iterative fits by 1e-8
+# (offsets) to 1e-4 (the zero-noise `alternating` rows) relative: the regression fixture
+# failed on an AVX-512 machine with the same code and wheels and passed with this setting.
+# It must be set before numpy loads OpenBLAS; a user's own setting wins.
+if platform.machine().lower() in ("x86_64", "amd64"):
+    os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
+
+from legcal_bench.provenance import package_version  # noqa: E402
 
 __version__ = package_version()

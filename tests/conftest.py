@@ -5,6 +5,8 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
+import legcal_bench  # noqa: E402,F401  (first: its OpenBLAS kernel choice must precede numpy's loading)
+
 import pytest
 
 REPO = Path(__file__).resolve().parents[1]
