@@ -18,12 +18,10 @@ def cmd_bench(a: argparse.Namespace) -> int:
     from legcal_bench.errors import ConfigError
 
     suite = get_suite(a.suite)
-    if "modelgap" not in suite.tags and a.effect_seeds:
-        raise ConfigError(f"--effect-seeds: the modelgap suite's option (seeds per library effect), not {a.suite!r}'s; "
-                          "use --seeds")
-    for opt, val in (("--cases", a.cases), ("--outside-robots", a.outside_robots)):
+    for opt, val, hint in (("--effect-seeds", a.effect_seeds, "; use --seeds"), ("--cases", a.cases, ""),
+                           ("--outside-robots", a.outside_robots, "")):
         if "modelgap" not in suite.tags and val:
-            raise ConfigError(f"{opt}: the modelgap suite's option, not {a.suite!r}'s")
+            raise ConfigError(f"{opt}: the modelgap suite's option, not {a.suite!r}'s{hint}")
     if "closed_loop" in suite.tags:
         return _bench_closed_loop(a, suite)
     if "modelgap" in suite.tags:
