@@ -6,8 +6,19 @@ the standard suite's cells (A2-like and A3-like, weld, seed 0, every calibrator
 variant) and for the zero-noise rows of `reproduce` (kinematic floor, matched
 setting, both solvers, every built-in robot and the G1), the offsets and scores that
 code produced, and which code that was. `check` recomputes them with the code at hand
-and lists every value that moved by more than 1e-7 relative or the absolute floor
-of its unit (1e-9 deg; the same angle in rad; 1e-9 mm), whichever is larger.
+and lists every value that moved by more than its relative tolerance or the absolute
+floor of its unit (1e-9 deg; the same angle in rad; 1e-9 mm), whichever is larger.
+
+The relative tolerance is what the same code and wheels move by from one CPU to another
+(OpenBLAS kernels pinned, `legcal_bench/__init__.py`): on an AMD EPYC (numpy's X86_V3
+path), the fixture made elsewhere reproduced within 4.1e-6 relative in every cell value
+and 2.2e-5 in the zero-noise `alternating` rows, whose solver stops on a cost change of
+1e-8 (`legcal-bench regression` at 4bd338d and at the change of issue #35, the same 18
+values moved, to the same digits). REL_TOL is 2.4x the first, REL_TOL_ALTERNATING 4.5x
+the second. What it still catches (`reports/regression/tolerance.md`): any of the
+paper's weights off by 1 % moves some offset of the A3-like weld cell by 1.04e-5 (the
+Tikhonov weight, just caught) to 4.0e-4 relative; the trim fraction or the knee prior
+by more.
 
 A change that is meant to move numbers regenerates the fixture on purpose
 (`legcal-bench regression --update`), bumps `RESULTS_VERSION` and says why.
@@ -30,7 +41,8 @@ from legcal_bench.provenance import code_version
 from legcal_bench.reports.reproduce import Reproduction
 from legcal_bench.robots import available
 
-REL_TOL = 1e-7
+REL_TOL = 1e-5
+REL_TOL_ALTERNATING = 1e-4  # the zero-noise rows of the paper's alternating solver (see above)
 ABS_TOL = {"deg": 1e-9, "rad": float(np.deg2rad(1e-9)), "mm": 1e-9}
 CELL_ROBOTS = ("a2", "a3")
 ZERO_NOISE_ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE)
@@ -94,7 +106,8 @@ def compare(expected: dict, actual: dict) -> list[str]:
             new = got[tuple(row[k] for k in ident)]
             for key, old in row["values"].items():
                 a, b = np.asarray(old, dtype=float), np.asarray(new[key], dtype=float)
-                tol = np.maximum(REL_TOL * np.abs(a), ABS_TOL[_unit(key.split(".")[-1])])
+                rel = REL_TOL_ALTERNATING if row.get("solver") == "alternating" else REL_TOL
+                tol = np.maximum(rel * np.abs(a), ABS_TOL[_unit(key.split(".")[-1])])
                 bad = np.abs(b - a) > tol
                 if bad.any():
                     i = int(np.flatnonzero(bad.ravel())[0])

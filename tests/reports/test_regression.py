@@ -1,6 +1,7 @@
 """The regression fixture: today's code reproduces the numbers the fixture pins
 (A2-like and A3-like standard-suite cells at seed 0 for every calibrator variant, and
-the zero-noise rows of `reproduce`) to 1e-7 relative or 1e-9 deg absolute."""
+the zero-noise rows of `reproduce`) to 1e-5 relative (the alternating solver's rows 1e-4: what
+the same code moves by from one CPU to another, `regression.REL_TOL`) or 1e-9 deg absolute."""
 
 import copy
 from pathlib import Path
@@ -23,8 +24,8 @@ def test_compare_flags_a_moved_value_and_spares_a_tiny_one():
     expected = regression.load_fixture(FIXTURE)
     moved = copy.deepcopy(expected)
     cell = moved["cells"][0]["values"]
-    cell["injected.offsets_rad"][3] *= 1 + 3e-7
-    cell["native.recovery.rms_error_deg"] *= 1 + 3e-8
+    cell["injected.offsets_rad"][3] *= 1 + 3e-5
+    cell["native.recovery.rms_error_deg"] *= 1 + 3e-6
     zero = moved["reproduce_zero_noise"][0]["values"]
     zero["rms_error_deg"] += 5e-10  # below the 1e-9 deg floor
     problems = regression.compare(expected, moved)
