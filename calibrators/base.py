@@ -1,7 +1,9 @@
 """The calibrator interface, its result type and the registry (`legcal_bench.calibrators.base`).
 
-A calibrator gets the nominal robot (its leg map) and the recordings' observable part
-(never the ground truth) and returns a `CalibrationResult`. Calibrators are found
+A calibrator gets the nominal robot (its leg map) and the training recordings'
+observable part (stances and standing: never the held-out sessions that score it, never
+the ground truth; `calibrate_training` is the framework's one door) and returns a
+`CalibrationResult`. Calibrators are found
 through the package entry-point group `legcal_bench.calibrators`: legcal-bench's own
 register there exactly as a third-party package does, so a researcher adds a method
 with one class and one line in their pyproject:
@@ -13,19 +15,17 @@ with one class and one line in their pyproject:
 from __future__ import annotations
 
 import json
-import inspect
 from abc import ABC, abstractmethod
 from dataclasses import asdict, dataclass, field
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
 
-from legcal_bench.data.recording import Recording
+from legcal_bench.data.recording import Recording, training
 from legcal_bench.errors import CalibrationError
-from legcal_bench.estimation.imu_motion import IMU_MODES
-from legcal_bench.estimation.preprocess import PreprocessConfig
+from legcal_bench.estimation.imu.imu_motion import IMU_MODES
+from legcal_bench.estimation.problem.preprocess import PreprocessConfig
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.robots.legmap import LegMap
 
@@ -109,39 +109,19 @@ class Calibrator(ABC):
     def settings(self) -> dict[str, Any]:
         return {}
 
-
-def available_calibrators() -> dict[str, type[Calibrator]]:
-    """Every calibrator registered in the entry-point group, by name."""
-    found: dict[str, type[Calibrator]] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        try:
-            cls = ep.load()
-        except ImportError as e:
-            raise CalibrationError(f"entry point {ep.name!r} ({ep.value}) cannot be imported: {e}; reinstall the "
-                                   "package that registers it (pip install -e .)") from None
-        if not (isinstance(cls, type) and issubclass(cls, Calibrator)):
-            raise CalibrationError(f"entry point {ep.name!r} ({ep.value}) is not a Calibrator subclass")
-        found[ep.name] = cls
-    return found
+    @classmethod
+    def benchmark_variants(cls) -> dict[str, dict[str, Any]]:
+        """The variants `bench` runs, each a leaderboard row: variant name -> constructor
+        options. Default: one, "default", with the constructor's defaults."""
+        return {"default": {}}
 
 
-def get_calibrator(name: str, **options: Any) -> Calibrator:
-    """The registered calibrator `name` with `options`; an option it does not take is a
-    CalibrationError listing the ones it does."""
-    found = available_calibrators()
-    if name not in found:
-        raise CalibrationError(f"unknown calibrator {name!r}; registered: {sorted(found)} "
-                               f"(add yours under the entry-point group '{ENTRY_POINT_GROUP}')")
-    cls = found[name]
-    params = inspect.signature(cls.__init__).parameters
-    if not any(p.kind is p.VAR_KEYWORD for p in params.values()):
-        known = [k for k in params if k != "self"]
-        unknown = sorted(set(options) - set(known))
-        if unknown:
-            what = "--setting/--solver/--option" if set(unknown) & {"setting", "solver"} else "--option"
-            raise CalibrationError(f"calibrator {name!r} has no option {unknown} ({what}); its options: "
-                                   + (", ".join(known) if known else "none"))
-    return cls(**options)
+def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[Recording]) -> CalibrationResult:
+    """The one door through which the framework calls a calibrator (`calibrate`, `bench`,
+    `sweep`, `walk-eval`, `diagnose`, the model-gap suite, the Python API): it gets the
+    training recordings only (stances and standing, `training`); the held-out sessions
+    that score its result never reach it."""
+    return calibrator.calibrate(robot, training(recordings))
 
 
 def number_option(name: str, value: Any, low: float | None = None, high: float | None = None, *,
@@ -161,8 +141,9 @@ def number_option(name: str, value: Any, low: float | None = None, high: float |
                                f"{low if low is not None and not low_open else 1}") from None
     bad = (not np.isfinite(v) or (low is not None and (v <= low if low_open else v < low))
            or (high is not None and (v >= high if high_open else v > high)))
-    if bad:
-        raise CalibrationError(f"option {name}={value!r}: must be {kind} in {rng}")
+    if bad:  # --option trim_fraction=1 arrives typed as 1.0; the message shows it as written
+        shown = repr(value).removesuffix(".0") if isinstance(value, float) else repr(value)
+        raise CalibrationError(f"option {name}={shown}: must be {kind} in {rng}")
     return v
 
 

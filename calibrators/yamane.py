@@ -12,8 +12,8 @@ both soles lie flat on one plane. Sole heights alone cannot see equal hip-pitch
 offsets on both legs (they act as a pelvis pitch); the IMU term makes the problem
 well-posed, and its weight decides how the method ranks.
 
-Both terms (`legcal_bench.estimation.terms.SoleHeightTerm`, `ImuTiltTerm`) go into one
-`legcal_bench.estimation.problem.Problem` with a shared offsets block and a per-frame
+Both terms (`legcal_bench.estimation.problem.terms.SoleHeightTerm`, `ImuTiltTerm`) go into one
+`legcal_bench.estimation.problem.problem.Problem` with a shared offsets block and a per-frame
 tilt block, so the Jacobian is block-sparse (2 unknowns per frame + 12 shared), handed
 to scipy's trust-region solver as a sparse matrix (LSMR inner solves) with
 `solver="sparse"`; the default, `solver="projected"`, eliminates the per-frame tilts by
@@ -37,14 +37,14 @@ from legcal_bench import paper
 from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_option, preprocess_options
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
-from legcal_bench.estimation.datacheck import data_warnings
-from legcal_bench.estimation.levelling import tilted, up_in_base
-from legcal_bench.estimation.noise import noise_sigmas
-from legcal_bench.estimation.imu_motion import IMU_WINDOW_S
-from legcal_bench.estimation.preprocess import filter_warnings, select_frames
-from legcal_bench.estimation.problem import Block, Problem
-from legcal_bench.estimation.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
-from legcal_bench.estimation.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
+from legcal_bench.estimation.checks.datacheck import data_warnings
+from legcal_bench.estimation.imu.levelling import tilted, up_in_base
+from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S
+from legcal_bench.estimation.problem.preprocess import filter_warnings, select_frames
+from legcal_bench.estimation.problem.problem import Block, Problem
+from legcal_bench.estimation.problem.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
+from legcal_bench.estimation.information.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                  uncertainty_warnings)
 from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap

@@ -23,7 +23,7 @@ rad/s, and `ft` (2, 6) [force N, torque N m] per ankle in weld and contact modes
 ## Rewards
 The information gain of the new frame about the 12 offsets: the increase of
 log det(H_data + εI) of the stance's matched residuals (mm, mrad) linearised at the
-logged data, ε = 1 (`legcal_bench.estimation.information.InformationGain`). An
+logged data, ε = 1 (`legcal_bench.estimation.information.gain.InformationGain`). An
 episode's return is therefore the log-determinant of the information its motion
 gathered (D-optimal design; less the reset frame's, `info["log_det_information"]`), the objective a learned excitation policy maximizes
 without knowing the calibration; `legcal-bench excite` learns a small one
@@ -65,7 +65,7 @@ from gymnasium import spaces
 
 from legcal_bench.envs.base import MujocoEnv
 from legcal_bench.errors import ConfigError, LegMapError
-from legcal_bench.estimation.information import InformationGain
+from legcal_bench.estimation.information.gain import InformationGain
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, place, posture_bounds
 from legcal_bench.robots import load_robot

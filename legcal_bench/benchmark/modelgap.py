@@ -2,7 +2,9 @@
 modelgap`).
 
 Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagnosed by
-`legcal_bench.evaluation.modelgap.diagnose` with `interfoot` (`sensor` setting):
+`legcal_bench.evaluation.modelgap.diagnose`, its fit started from a calibrator's offsets
+(default `interfoot`, its default `sensor` setting; any registered one with
+`bench --calibrators`), on the training recordings only:
   clean         no effect: the false-alarm rate (an effect claimed, or "ambiguous"),
                 and how far the data are from the declared noise at the true offsets;
   clean_kinematic  the same on the kinematic floor;
@@ -44,6 +46,8 @@ NEAR_Z = (2.0, 10.0)  # ... scored over the seeds whose offsets-only post-fit z 
 MULTI_COUNT, MULTI_SCALE = 3, 0.25  # several small effects at once: 3 library effects, each at a quarter of its draw
 OUTSIDE_ROBOTS = ("a3",)  # the outside edits run on these of the suite's robots (time: ~35 s a diagnosis)
 SIDES = ("left", "right")
+DEFAULT_CALIBRATOR = ("interfoot", ())  # (name, options as key-value pairs): the offsets each diagnosis starts from
+GAP_LABEL = {"cross_validation": "left-out stances", "heldout": "held-out"}
 
 
 def library_spec(effect: str, seed: int, scale: float = 1.0) -> str:
@@ -103,10 +107,14 @@ def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: st
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 
 
-def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None) -> dict:
+def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
+             calibrator: tuple = DEFAULT_CALIBRATOR) -> dict:
     """One diagnosed session set; `kind` clean | library | near | multi | outside |
-    reference; `stances` recorded (default: the paper's four)."""
-    from legcal_bench.calibrators.base import get_calibrator
+    reference; `stances` recorded (default: the paper's four); `calibrator` (name,
+    options as key-value pairs) makes the offsets the diagnosis starts from."""
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
+    from legcal_bench.estimation.problem.fit import fit_model
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
 
@@ -122,30 +130,33 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None) -
     elif kind in ("outside", "reference"):
         spec, side = outside_spec(name, seed, REFERENCE_SCALE if kind == "reference" else 1.0)
         specs = (spec,)
-    cal = get_calibrator("interfoot", setting="sensor")
+    cal_name, cal_options = calibrator
+    cal = get_calibrator(cal_name, **dict(cal_options))
     with tempfile.TemporaryDirectory(prefix="legcal_modelgap_") as work:
         mode = "kinematic" if kind == "clean_kinematic" else "weld"
         legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode, stances)
         row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name,
                "spec": " ".join(specs) or None, "seed": seed, "side": side, "scale": scale, "mode": mode}
         if kind == "reference":
-            from legcal_bench.calibrators.interfoot import fit_model
-
-            ctx = context(cal, legmap, recs)
-            ev = evaluate(ctx, fit_model(cal, ctx.prep), ctx.prep.segments, keep_frames=True)
+            ctx = context(legmap, recs)
+            ev = evaluate(ctx, fit_model(ctx.prep), ctx.prep.segments, keep_frames=True)
             row["localization"] = trace(ctx, ev)["localization"]
             return row
-        rep = diagnose(cal, legmap, recs)
+        names = legmap.joint_names
+        start = calibrate_training(cal, legmap, recs).offsets_vector(names)
+        rep = diagnose(legmap, recs, start=start)
         if kind.startswith("clean"):
-            row["at_truth"] = _chi2_at_truth(cal, legmap, recs, truth)
+            row["at_truth"] = _chi2_at_truth(legmap, recs, truth)
     injected = np.asarray(truth.offsets)
-    names = legmap.joint_names
+    if calibrator != DEFAULT_CALIBRATOR:
+        row["calibrator"] = {"name": cal_name, "options": dict(cal_options),
+                             "offsets_rms_deg": float(np.rad2deg(rms(start - injected)))}
     before = np.array([rep["offsets_only_rad"][n] for n in names])
     after = np.array([rep["offsets_rad"][n] for n in names])
     row.update(verdict=rep["verdict"], selected=rep["selected"], poor_fit=rep["poor_fit"],
                ambiguous=[a["effect"] for a in rep["ambiguous"]], summary=rep["summary"],
                chi2_per_dof=rep["detection"]["chi2_per_dof"], p_value=rep["detection"]["p_value"],
-               z=rep["detection"]["z"], heldout=rep["detection"].get("heldout"),
+               z=rep["detection"]["z"], cross_validation=rep["detection"].get("cross_validation"),
                chi2_per_dof_after=rep["after"]["chi2_per_dof"],
                localization=rep["tracing"]["localization"],
                offsets_rms_deg={"before": float(np.rad2deg(rms(before - injected))),
@@ -154,22 +165,17 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None) -
     return row
 
 
-def _chi2_at_truth(cal, legmap, recs, truth) -> dict:
+def _chi2_at_truth(legmap, recs, truth) -> dict:
     """Whitened chi-square per degree of freedom with the offsets at the injected truth
-    (no step): what the data hold beyond the declared noise that no estimate causes."""
-    from legcal_bench.calibrators.interfoot import fit_model
+    (no step), on the training stances: what the data hold beyond the declared noise
+    that no estimate causes."""
+    from legcal_bench.estimation.problem.fit import offsets_fit
     from legcal_bench.evaluation.modelgap import context, evaluate
 
-    ctx = context(cal, legmap, recs)
-    fit = fit_model(cal, ctx.prep)
-    fit.x[:12] = np.asarray(truth.offsets)
-    out = {}
-    for key, segs in (("training", ctx.prep.segments), ("heldout", ctx.heldout)):
-        if segs:
-            ev = evaluate(ctx, fit, segs)
-            dof = ev.n_rows - 6 * len({s.name for s in segs})
-            out[key] = float(ev.z @ ev.z) / dof
-    return out
+    ctx = context(legmap, recs)
+    segs = ctx.prep.segments
+    ev = evaluate(ctx, offsets_fit(ctx.prep, np.asarray(truth.offsets)), segs)
+    return {"training": float(ev.z @ ev.z) / (ev.n_rows - 6 * len({s.name for s in segs}))}
 
 
 def _case(args):
@@ -177,8 +183,8 @@ def _case(args):
 
 
 def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int, near_seeds: int = 0,
-         multi_seeds: int = 0, stances=None, cases=CASES) -> list[tuple]:
-    """(robot, kind, name, seed, stances) of every case of the groups in `cases`."""
+         multi_seeds: int = 0, stances=None, cases=CASES, calibrator: tuple = DEFAULT_CALIBRATOR) -> list[tuple]:
+    """(robot, kind, name, seed, stances, calibrator) of every case of the groups in `cases`."""
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
         raise ConfigError(f"--cases: {', '.join(unknown)} unknown; the model-gap suite's cases are "
@@ -192,19 +198,20 @@ def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: in
     out += [(r, "reference", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(2)]
     out += [(r, "outside", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
     group = {"clean_kinematic": "clean", "reference": "outside"}
-    return [j for j in out if group.get(j[1], j[1]) in cases]
+    return [(*j, calibrator) for j in out if group.get(j[1], j[1]) in cases]
 
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_ROBOTS, outside_seeds: int = 10,
         near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True,
-        stances=None, cases=CASES) -> dict:
+        stances=None, cases=CASES, calibrator: tuple = DEFAULT_CALIBRATOR) -> dict:
     """Every case (`jobs`) of the groups in `cases` diagnosed; `seeds` per library
     effect, the other counts as named; `stances` recorded in every case (default: the
-    paper's four)."""
+    paper's four); `calibrator` (name, options as key-value pairs) makes the offsets each
+    diagnosis starts from."""
     from legcal_bench.files.parallel import map_with_progress
 
     todo = jobs(robots, seeds, clean_seeds, [r for r in outside_robots if r in robots], outside_seeds, near_seeds,
-                multi_seeds, stances, cases)
+                multi_seeds, stances, cases, calibrator)
     rows = map_with_progress(_case, todo, workers, "modelgap", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
@@ -282,14 +289,22 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 def _clean_summary(robot: str, case: str, clean: list[dict]) -> dict:
     truth_chi2 = {k: [r["at_truth"][k] for r in clean if k in r.get("at_truth", {})] for k in ("training", "heldout")}
+    # The gap test: leave-one-stance-out since #35; rows made before read the held-out sessions.
+    gap = "cross_validation" if any("cross_validation" in r for r in clean) else "heldout"
     return {"robot": robot, "case": case, "seeds": len(clean),
             "no_effect_claimed": sum(not r["selected"] and not r["ambiguous"] for r in clean),
             "detected": sum(r["verdict"] != "explained" for r in clean),
             "training_test_fired": sum(r["p_value"] < ALPHA / 2 for r in clean),
-            "heldout_test_fired": sum((r.get("heldout") or {}).get("p_value", 1.0) < ALPHA / 2 for r in clean),
+            f"{gap}_test_fired": sum((r.get(gap) or {}).get("p_value", 1.0) < ALPHA / 2 for r in clean),
             "chi2_per_dof_at_truth": {k: _mean_max(v) for k, v in truth_chi2.items() if v},
             "verdicts": _count(r["verdict"] for r in clean),
             "floor_offsets_rms_deg": float(np.mean([_recommended(r) for r in clean]))}
+
+
+def _gap_fired(s: dict) -> str:
+    """The gap test's label and count of a clean summary (`_clean_summary`)."""
+    gap = "cross_validation" if "cross_validation_test_fired" in s else "heldout"
+    return f"{GAP_LABEL[gap]} {s[gap + '_test_fired']}"
 
 
 def _recommended(r: dict) -> float:
@@ -315,9 +330,11 @@ def _count(values) -> dict:
 
 
 def markdown(data: dict, made_by: str, code: str) -> str:
+    starts = sorted({r["calibrator"]["name"] for r in data.get("rows", ()) if "calibrator" in r})
+    who = f"`{'`, `'.join(starts)}` (offsets the diagnosis starts from)" if starts else "`interfoot` (`sensor`)"
     L = ["# Model-gap loop: detection, attribution, \"unexplained\"", "",
          f"Made by `{made_by}` ({code}). Weld (clean_kinematic: the kinematic floor), `calibrated-imu`, the paper's "
-         "injection; `interfoot` (`sensor`) "
+         f"injection; {who} "
          "then `legcal_bench.evaluation.modelgap.diagnose`. Library magnitudes drawn per seed in realistic ranges "
          "(`library_spec`); offsets: RMS error of the 12 offsets (deg), offsets-only vs after the diagnosis.", "",
          "| robot | case | seeds | detected | correct / no effect claimed | wrong confident | offsets before | after "
@@ -326,7 +343,7 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         v = ", ".join(f"{k} {n}" for k, n in s["verdicts"].items())
         if s["case"].startswith("clean"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']} (training test {s['training_test_fired']}"
-                     f", held-out {s['heldout_test_fired']}) | {s['no_effect_claimed']}/{s['seeds']} | – | – | "
+                     f", {_gap_fired(s)}) | {s['no_effect_claimed']}/{s['seeds']} | – | – | "
                      f"{s['floor_offsets_rms_deg']:.4f} | – | – | {v} |")
         elif s["case"].startswith("near"):
             L.append(f"| {s['robot']} | {s['case']} ({s['scales'][0]:.2f}–{s['scales'][1]:.2f} of the size; z "

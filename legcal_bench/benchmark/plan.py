@@ -6,8 +6,8 @@ motions and noise: `native` (the robot's own factory residual, by default drawn
 uniformly in +-1.2 deg per joint, 0.69 deg RMS, the scale of the paper's real robots'
 0.57-0.81 deg; nothing injected) and `injected` (native + the paper's injection x
 scale). The native spec is a collection override like the others (`native`:
-`random:<deg>`, `paper-base`, `none`). Calibrators come from the registry (entry-point group); a class may offer
-`benchmark_variants()` (name -> options), else it runs once as "default".
+`random:<deg>`, `paper-base`, `none`). Calibrators come from the registry (entry-point group); each runs
+once per variant of its `benchmark_variants()` (name -> options; by default one, "default").
 
 Each cell has a resume key: a hash of the calibrator's settings, the two session sets'
 collection configs (what their manifests record) and `RESULTS_VERSION`. A finished cell
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.benchmark.suites import SUITES, Suite, get_suite
-from legcal_bench.calibrators.base import available_calibrators, get_calibrator
+from legcal_bench.calibrators.registry import available_calibrators, get_calibrator
 from legcal_bench.errors import ConfigError, CalibrationError
 from legcal_bench.protocol.collect import CollectConfig
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
@@ -136,8 +136,7 @@ def calibrator_variants(names: list[str] | None = None) -> list[tuple[str, str, 
         found = {n: found[n] for n in names}
     out = []
     for name in sorted(found):
-        variants = getattr(found[name], "benchmark_variants", None)
-        for variant, options in (variants() if variants else {"default": {}}).items():
+        for variant, options in found[name].benchmark_variants().items():
             out.append((name, variant, options))
     return out
 

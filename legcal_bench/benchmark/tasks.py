@@ -12,7 +12,8 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.benchmark.plan import Cell, Dataset
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.base import calibrate_training
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.errors import LegcalError
 from legcal_bench.evaluation.metrics import rms
@@ -92,7 +93,7 @@ def _calibrate_and_score(cell: Cell, legmap, data_dir: str, out: dict) -> None:
     for inj in ("native", "injected"):
         bags = Path(data_dir) / cell.dataset(inj).name
         recs = load_session(bags, robot=legmap)
-        res = get_calibrator(cell.calibrator, **dict(cell.options)).calibrate(legmap, recs)
+        res = calibrate_training(get_calibrator(cell.calibrator, **dict(cell.options)), legmap, recs)
         est[inj] = res.offsets_vector(names)
         s = score(str(bags), res, legmap)
         residuals = s.get("heldout", {}).pop("foot_height_residuals_mm", None)

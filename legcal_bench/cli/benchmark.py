@@ -175,7 +175,7 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.modelgap import CASES, OUTSIDE_ROBOTS, RESULTS_NAME, markdown, run
+    from legcal_bench.benchmark.modelgap import CASES, DEFAULT_CALIBRATOR, OUTSIDE_ROBOTS, RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
     from legcal_bench.errors import ConfigError
     from legcal_bench.files.reports import write_report
@@ -191,6 +191,15 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
             robots.append(r)
     seeds = a.seeds or suite.seeds
     effect_seeds = a.effect_seeds or seeds
+    calibrator = DEFAULT_CALIBRATOR
+    if a.calibrators:
+        from legcal_bench.calibrators.registry import get_calibrator
+
+        if len(a.calibrators) != 1:
+            raise ConfigError(f"--calibrators {' '.join(a.calibrators)}: the modelgap suite starts every diagnosis "
+                              "from one calibrator's offsets; give one")
+        get_calibrator(a.calibrators[0])  # an unknown name fails before any case runs
+        calibrator = (a.calibrators[0], ())
     if a.stances:
         check_stance_names(a.stances)
     if a.outside_robots:
@@ -202,12 +211,14 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
                + (f" --effect-seeds {effect_seeds}" if a.effect_seeds else "")
                + (f" --stances {' '.join(a.stances)}" if a.stances else "")
                + (f" --cases {' '.join(a.cases)}" if a.cases else "")
-               + (f" --outside-robots {' '.join(a.outside_robots)}" if a.outside_robots else ""))
+               + (f" --outside-robots {' '.join(a.outside_robots)}" if a.outside_robots else "")
+               + (f" --calibrators {calibrator[0]}" if a.calibrators else ""))
     code = code_version()
     t0 = time.perf_counter()
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
                multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
-               cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots or OUTSIDE_ROBOTS))
+               cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots or OUTSIDE_ROBOTS),
+               calibrator=calibrator)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
@@ -238,7 +249,9 @@ def add_commands(sub) -> None:
     bn.add_argument("--outside-robots", nargs="+", default=None,
                     help="modelgap suite: the robots (of --robots) the edits outside the library run on (default a3: "
                          "~35 s a diagnosis)")
-    bn.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators")
+    bn.add_argument("--calibrators", nargs="+", default=None,
+                    help="only these registered calibrators (modelgap suite: the one whose offsets every diagnosis "
+                         "starts from, default interfoot)")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")
     bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached")

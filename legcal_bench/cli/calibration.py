@@ -12,21 +12,6 @@ from legcal_bench.cli.robots import robot_args
 from legcal_bench.errors import ConfigError
 
 
-def parse_options(pairs: list[str]) -> dict:
-    """`--option key=value` pairs; values are read as JSON when they parse (numbers,
-    true/false, lists), else kept as strings."""
-    out = {}
-    for pair in pairs or []:
-        if "=" not in pair:
-            raise ConfigError(f"--option {pair!r}: write key=value, e.g. --option lambda_q=0.1")
-        k, v = pair.split("=", 1)
-        try:
-            out[k] = json.loads(v)
-        except json.JSONDecodeError:
-            out[k] = v
-    return out
-
-
 def writable_parent(path: str, option: str) -> None:
     """Create `path`'s folder now, so an unwritable output fails before the work."""
     parent = Path(path).parent
@@ -38,11 +23,12 @@ def writable_parent(path: str, option: str) -> None:
 
 
 def cmd_calibrate(a: argparse.Namespace) -> int:
-    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator, parse_options
     from legcal_bench.data.recording import load_session
     from legcal_bench.robots import load_robot, resolve_robot
 
-    options = parse_options(a.option)
+    options = parse_options(a.calibrator, a.option)
     if a.setting is not None:
         options["setting"] = a.setting
     if a.solver is not None:
@@ -53,11 +39,11 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
     writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
     recordings = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
-    result = calibrator.calibrate(legmap, recordings)
+    result = calibrate_training(calibrator, legmap, recordings)
     result.settings["robot_spec"] = resolve_robot(a.robot)
     result.save(a.out)
     if a.plots and result.conditioning.get("eigenvalues_H_reg"):
-        from legcal_bench.estimation.observability import plot_observability
+        from legcal_bench.estimation.information.observability import plot_observability
 
         plot_observability(result.conditioning, legmap.joint_names, Path(a.plots) / "observability.png",
                            title=f"{legmap.name} {result.calibrator}")
@@ -129,7 +115,7 @@ def cmd_check(a: argparse.Namespace) -> int:
     per recording, and the warnings it raises."""
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.data.recording import load_session
-    from legcal_bench.estimation.datacheck import LIMITS, data_warnings, statistics
+    from legcal_bench.estimation.checks.datacheck import LIMITS, data_warnings, statistics
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.kinematics import LegKinematics
 
@@ -166,7 +152,7 @@ def cmd_check(a: argparse.Namespace) -> int:
 def cmd_design(a: argparse.Namespace) -> int:
     """Predicted information of the default stances against a greedy E-optimal choice
     of sampled stances, each screened in simulation for the hold check (weld, contact)."""
-    from legcal_bench.estimation.design import design
+    from legcal_bench.estimation.information.design import design
     from legcal_bench.protocol.stances import STANCES
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.kinematics import LegKinematics
@@ -278,7 +264,8 @@ def cmd_export(a: argparse.Namespace) -> int:
 
 def cmd_diagnose(a: argparse.Namespace) -> int:
     """The model-gap loop on a set of recordings: verdict, effects, tracing (markdown, JSON, plot)."""
-    from legcal_bench.calibrators.base import CalibrationResult, get_calibrator
+    from legcal_bench.calibrators.base import CalibrationResult, calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator, parse_options
     from legcal_bench.data.recording import load_session
     from legcal_bench.errors import CalibrationError
     from legcal_bench.evaluation.modelgap import diagnose
@@ -290,19 +277,16 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
 
     if a.walk_trials < 1:
         raise ConfigError(f"--walk-trials {a.walk_trials}: give at least 1")
-    options = {"setting": "sensor"}
+    res, cal = None, None
     if a.result:
+        if a.option:
+            raise ConfigError("--option: give it with --calibrator; --result's offsets are already made")
         try:
             res = CalibrationResult.load(a.result)
         except CalibrationError as e:
             raise ConfigError(f"--result: {e}; give the file legcal-bench calibrate --out wrote") from None
-        if res.calibrator != "interfoot":
-            raise ConfigError(f"--result {a.result}: calibrator {res.calibrator!r}; the diagnosis refits "
-                              "with interfoot's residuals (calibrate with --calibrator interfoot)")
-        setting = res.settings.get("setting")
-        if setting:
-            options["setting"] = setting
-    cal = get_calibrator("interfoot", **options)
+    else:  # a bad name or option fails before any data is read
+        cal = get_calibrator(a.calibrator, **parse_options(a.calibrator, a.option))
     writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
     if a.walk:
@@ -310,9 +294,12 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
 
         PolicyRunner(a.walk, legmap)  # a bad spec fails here, before the diagnosis
     recordings = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
+    if res is None:
+        res = calibrate_training(cal, legmap, recordings)
     effects = a.effects or None
-    report = diagnose(cal, legmap, recordings, effects=effects,
+    report = diagnose(legmap, recordings, start=res.offsets_vector(legmap.joint_names), effects=effects,
                       progress=None if a.quiet else (lambda m: print(f"  diagnose: {m}", flush=True)))
+    report["start"] = {"calibrator": res.calibrator, "settings": res.settings, "offsets_rad": res.offsets_rad}
     truth = truth_scores(report, Path(a.bags), legmap.joint_names)
     report["heldout_foot_height_mm"] = heldout_scores(report, legmap, Path(a.bags))
     made_by = (f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}" + (f" --result {a.result}" if a.result else "")
@@ -343,7 +330,12 @@ def add_commands(sub) -> None:
     robot_args(dg)
     dg.add_argument("--bags", required=True, help="directory of recordings")
     dg.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
-    dg.add_argument("--result", default=None, help="a calibrate result JSON (interfoot): its setting is reused")
+    dg.add_argument("--result", default=None, help="a calibrate result JSON of any calibrator: the diagnosis's fit "
+                                                   "starts from its offsets (default: run --calibrator now)")
+    dg.add_argument("--calibrator", default="interfoot", help="registered calibrator whose offsets the diagnosis "
+                                                              "starts from, when no --result (default interfoot)")
+    dg.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="an option of --calibrator, typed from its constructor (repeatable)")
     dg.add_argument("--effects", nargs="+", default=None, help="candidate library effects (default: all registered)")
     dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png")
     dg.add_argument("--walk", default=None, metavar="POLICY",
@@ -365,7 +357,8 @@ def add_commands(sub) -> None:
                                                    "a2_operating")
     k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
     k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="any calibrator option, e.g. --option lambda_q=0.1 (repeatable)")
+                   help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 "
+                        "(repeatable; an unknown key lists the calibrator's options, types and defaults)")
     k.add_argument("--with-effects", nargs="+", default=None, metavar="EFFECT",
                    help="interfoot: also fit these model-gap effects (plug-ins of the entry-point group "
                         "legcal_bench.effects; built in: leg_length, encoder_scale, compliance, imu_tilt, hip_axis): "

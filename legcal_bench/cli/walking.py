@@ -105,6 +105,7 @@ def cmd_walk(a: argparse.Namespace) -> int:
 
 
 def cmd_walk_eval(a: argparse.Namespace) -> int:
+    from legcal_bench.calibrators.registry import get_calibrator, parse_options
     from legcal_bench.errors import ConfigError
     from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, calibrator_options, evaluate
     from legcal_bench.provenance import code_version, describe
@@ -115,9 +116,7 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     options = calibrator_options(a.calibrator)
     if a.setting:
         options["setting"] = a.setting
-    for kv in a.option or []:
-        k, _, v = kv.partition("=")
-        options[k] = v
+    options.update(parse_options(a.calibrator, a.option))
     offsets = [a.offsets] if not a.sweep else [
         (a.offsets.split("@")[0] + "@" if "@" in a.offsets else a.offsets.split(":")[0] + ":") + f"{d:g}"
         for d in a.sweep]
@@ -125,6 +124,7 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.robots import load_robot
 
+    get_calibrator(a.calibrator, **options)  # a bad option (--setting included) fails here, before any walk
     PolicyRunner(a.policy, load_robot(a.robot, a.mjcf))  # a bad spec or robot fails here, before any worker
     executor, client = make_executor(a.scheduler, a.workers) if a.workers > 1 or a.scheduler else (None, None)
     summaries, trials = [], []
@@ -144,6 +144,7 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     made_by = (f"legcal-bench walk-eval --robot {a.robot} --policy {a.policy} --offsets {a.offsets} --trials {a.trials} "
                f"--calibrator {a.calibrator}" + (f" --setting {a.setting}" if a.setting else "")
                + (" --sweep " + " ".join(f"{d:g}" for d in a.sweep) if a.sweep else "")
+               + "".join(f" --option {kv}" for kv in a.option or [])
                + (f" --static-sensors {a.static_sensors}" if a.static_sensors != "calibrated-imu" else ""))
     print(write(a.out, summaries, trials, describe(code_version()), made_by))
     print(f"wrote the report in {a.out}")
@@ -248,7 +249,8 @@ def add_commands(sub) -> None:
     e.add_argument("--calibrator", default="interfoot")
     e.add_argument("--setting", default=None, help="the calibrator's setting (default: its sensor-matched variant "
                                                    "where it has one)")
-    e.add_argument("--option", action="append", help="calibrator option k=v (repeatable)")
+    e.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                   help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 (repeatable)")
     e.add_argument("--static-sensors", default="calibrated-imu", help="sensors of the static session sets "
                                                                       "(default calibrated-imu; also realistic)")
     e.add_argument("--sensors", default="realistic", help="sensors while walking")

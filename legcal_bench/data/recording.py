@@ -25,6 +25,9 @@ from legcal_bench.sim.sensors import SensorModel
 FORMAT = "legcal-recording"
 VERSION = 1
 KINDS = ("standing", "stance", "heldout")
+# What a calibrator may see: the stances and the straight-leg standing phase. Held-out
+# sessions score a result and never feed it (`training`).
+TRAINING_KINDS = ("standing", "stance")
 MOTIONS = ("continuous", "static")
 MANIFEST = "session.json"
 
@@ -293,6 +296,12 @@ def list_segments(directory: str | Path, allow_partial: bool = False) -> list[Pa
                              f"half-way; write a {MANIFEST} listing its files (docs/recording-format.md), or pass "
                              "--allow-partial to use every recording in the folder")
     return paths
+
+
+def training(recordings: list["Recording"]) -> list["Recording"]:
+    """The recordings a calibrator, a diagnosis or a model selection may read: the
+    training kinds (`TRAINING_KINDS`); the held-out sessions are kept for scoring."""
+    return [r for r in recordings if r.kind in TRAINING_KINDS]
 
 
 def load_session(directory: str | Path, joint_names: list[str] | None = None,

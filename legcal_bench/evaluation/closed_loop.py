@@ -66,16 +66,16 @@ class ClosedLoopConfig:
 def calibrator_options(name: str) -> dict:
     """The calibrator's sensor-matched variant where it has one (`benchmark_variants`),
     else its defaults."""
-    from legcal_bench.calibrators.base import available_calibrators
+    from legcal_bench.calibrators.registry import available_calibrators
 
     cls = available_calibrators().get(name)
-    variants = cls.benchmark_variants() if cls is not None and hasattr(cls, "benchmark_variants") else {}
-    return dict(variants.get("sensor", {}))
+    return dict(cls.benchmark_variants().get("sensor", {})) if cls is not None else {}
 
 
 def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
     """One trial: the static calibration, then the four walks."""
-    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import load_session
     from legcal_bench.envs.walking import WalkingEnv
     from legcal_bench.policies.runner import PolicyRunner
@@ -93,8 +93,8 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
                                   sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
                     tmp, progress=False)
             recs = load_session(tmp, robot=legmap)
-            result = get_calibrator(cfg.calibrator, **cfg.options).calibrate(legmap, recs)
-            others = {label: get_calibrator(name, **dict(opts)).calibrate(legmap, recs).offsets_vector(
+            result = calibrate_training(get_calibrator(cfg.calibrator, **cfg.options), legmap, recs)
+            others = {label: calibrate_training(get_calibrator(name, **dict(opts)), legmap, recs).offsets_vector(
                 legmap.joint_names) for label, name, opts in cfg.variants}
     except HoldError as e:
         failed = str(e)

@@ -3,7 +3,7 @@ if not, where does the residual live, and which effect of the library is missing
 none ("unexplained").
 
 Detection. The noise model, carried to each frame's residual
-(`legcal_bench.estimation.whitening`), whitens it (the declared encoder noise; the IMU
+(`legcal_bench.estimation.information.whitening`), whitens it (the declared encoder noise; the IMU
 tilt noise declared or, when larger, measured from the data: `tilt_noise`); for a model
 that explains the data the whitened chi-square is chi2(dof), dof = sum of the frames'
 ranks - 6 per segment (the inter-foot means) - the free parameters. Each fit's
@@ -11,8 +11,10 @@ chi-square is taken after one Gauss-Newton step of the whitened problem from tha
 (the `sensor` setting's fit ends at that problem's optimum where the declared noise
 holds, and the step is ~0; a row-weighted fit is brought there, which makes models
 comparable). Tests, each at ALPHA / 2: the training chi-square against chi2(dof), and
-the gap between the held-out sessions' chi-square per dof (at the training estimate)
-and the training's, against F (`_gap`).
+the gap between the leave-one-stance-out chi-square per dof (each stance at the
+estimate from the others) and the training's, against F (`_gap`). Only the training
+recordings (stances, standing: `legcal_bench.data.recording.training`) are read: the
+held-out sessions that score a result never feed it, its detection or its selection.
 
 Selection, run only when a detection test fires, greedy and nested (at most
 MAX_EFFECTS): each library effect is fitted on
@@ -31,7 +33,7 @@ a selection that leaves a significant residual a generic leg or IMU error still 
 Tracing (`trace`): the whitened residual by channel, stance and leg (a generic
 geometric error of each leg, `LegGeometry`, and the IMU's tilt, scored without a fit)
 and against signatures (joint angle, load, motion direction per joint; time per
-segment) by score tests (`legcal_bench.estimation.lineartests`).
+segment) by score tests (`legcal_bench.estimation.modelgap.lineartests`).
 """
 
 from __future__ import annotations
@@ -42,12 +44,15 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
 
-from legcal_bench.estimation.effects import joint_loads, load_effects, registry
-from legcal_bench.estimation.lineartests import basis, chi2_after, score
-from legcal_bench.estimation.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
-from legcal_bench.estimation.tilt_noise import measured_tilt_noise
-from legcal_bench.estimation.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
+from legcal_bench.estimation.modelgap.effects import joint_loads, load_effects, registry
+from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, score
+from legcal_bench.estimation.modelgap.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
+from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
+from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
+from legcal_bench.data.recording import training
+from legcal_bench.estimation.problem.fit import declared_noise, fit_model, frame_residuals, start_confounds
+from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
 from legcal_bench.robots.legmap import SIDES
 
 ALPHA = 0.01  # false-alarm rate of the detection tests together (each at ALPHA / 2)
@@ -92,11 +97,9 @@ class Evaluated:
 
 @dataclass
 class Context:
-    cal: object
-    prep: object
+    prep: Prepared
     sigma_q: float
     sigma_t: float
-    heldout: list = field(default_factory=list)  # held-out segments
     recordings: dict = field(default_factory=dict)  # name -> Recording (velocities for tracing)
     # How well tracing's columns are known (`lineartests.score`): the largest angular
     # noise of a frame's residual rows (rad), the inter-foot rotation or a sole normal.
@@ -112,9 +115,7 @@ def _free_columns(fit) -> list[int]:
 def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -> Evaluated:
     """Whitened residual of `segments` at `fit` and the chi-square after one whitened
     Gauss-Newton step over the fit's free columns."""
-    from legcal_bench.calibrators.interfoot import frame_residuals
-
-    fr = frame_residuals(ctx.cal, ctx.prep, fit, segments, extra)
+    fr = frame_residuals(ctx.prep, fit, segments, extra)
     cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
     W, rank = whitening(cov)
     free = _free_columns(fit)
@@ -126,7 +127,7 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -
 
 
 def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, int]:
-    """Chi-square of `segments` (not in the fit) at the training estimate after its
+    """Chi-square of `segments` (not in the fit) at the fit's estimate after its
     Gauss-Newton step, their own inter-foot means re-estimated; (chi2, dof)."""
     ev = evaluate(ctx, fit, segments)
     z = ev.z - ev.Jw @ train.step
@@ -136,11 +137,11 @@ def heldout_chi2(ctx: Context, fit, train: Evaluated, segments) -> tuple[float, 
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
-    """The gap between the held-out sessions' residual (chi-square c, d dof, at the
-    training estimate) and the training residual: F = (c/d) / (chi2/dof of training),
+    """The gap between the left-out stances' residual (chi-square c, d dof, each at the
+    estimate from the other stances) and the training residual: F = (c/d) / (chi2/dof of training),
     F(d, dof) if both hold the same noise; p_value is its upper tail. Testing the gap,
     not the held-out residual against the declared noise alone, keeps an error common to
-    every session (which the training test already judges) from counting twice."""
+    every stance (which the training test already judges) from counting twice."""
     ratio = (c / d) / (train.chi2 / train.dof)
     return {"chi2": c, "dof": d, "chi2_per_dof": c / d, "ratio_to_training": ratio,
             "p_value": float(f_dist.sf(ratio, d, train.dof)),
@@ -148,24 +149,24 @@ def _gap(c: float, d: int, train: Evaluated) -> dict:
 
 
 def _fires(tests: dict) -> bool:
-    """Does the training test or the held-out gap test fire (each at ALPHA / 2)?"""
-    return tests["p_value"] < ALPHA / 2 or tests.get("heldout", {}).get("p_value", 1.0) < ALPHA / 2
+    """Does the training test or the cross-validation gap test fire (each at ALPHA / 2)?"""
+    return tests["p_value"] < ALPHA / 2 or tests.get("cross_validation", {}).get("p_value", 1.0) < ALPHA / 2
 
 
-def context(cal, robot, recordings) -> Context:
-    from legcal_bench.calibrators.interfoot import declared_noise
-
-    prep = cal.prepare(robot, recordings)
+def context(robot, recordings, prep: Prepared | None = None) -> Context:
+    """The diagnosis's data: the training recordings (held-out ones are dropped here)
+    prepared for the framework's noise-weighted fit (`prepare_sensor`) unless `prep` is
+    given, and the noise model to judge residuals against."""
+    recordings = training(recordings)
+    prep = prepare_sensor(robot, recordings) if prep is None else prep
     sig = declared_noise(prep, "diagnose cannot judge a residual against noise nobody declared; record with "
                                "--sensors realistic or calibrated-imu")
-    held = [r for r in recordings if r.kind == "heldout"]
-    heldout, _ = cal.segments_of(prep.kin, held) if held else ([], [])
     # The IMU vertical's noise: the declared, or what the data show when more (`tilt_noise`).
     measured = measured_tilt_noise(prep.kin, prep.stances)
     sigma_t = sig["tilt"] if measured is None else max(sig["tilt"], measured)
     noise = {"encoder_rad": sig["encoder"], "tilt_declared_rad": sig["tilt"], "tilt_measured_rad": measured,
              "tilt_used_rad": sigma_t}
-    return Context(cal, prep, sig["encoder"], sigma_t, heldout, {r.name: r for r in recordings},
+    return Context(prep, sig["encoder"], sigma_t, {r.name: r for r in recordings},
                    max(sig["feet_rotation"], sig["flat_normal"]), noise)
 
 
@@ -175,24 +176,27 @@ def _offsets_sigma(ev: Evaluated) -> np.ndarray:
     return np.sqrt(np.diag(np.linalg.pinv(H))[:12])
 
 
-def _cv(ctx: Context, effects: tuple, base_folds: dict | None) -> tuple[float, dict]:
-    """Leave-one-stance-out chi-square of the model with `effects`; the folds' offsets-
-    only fits are reused from `base_folds` (recording -> offsets) when given."""
-    from legcal_bench.calibrators.interfoot import fit_model
-
+def _cv(ctx: Context, effects: tuple, base_folds: dict | None) -> tuple[float, int, dict]:
+    """Leave-one-stance-out chi-square of the model with `effects` and its degrees of
+    freedom; the folds' offsets-only fits are reused from `base_folds` (recording ->
+    offsets) when given."""
     segs = ctx.prep.segments
     names = list(dict.fromkeys(s.recording for s in segs))
-    total, dq = 0.0, {}
+    total, dof, dq = 0.0, 0, {}
     for name in names:
         train = [s for s in segs if s.recording != name]
         test = [s for s in segs if s.recording == name]
         dq0 = None if base_folds is None else base_folds[name]
-        fit = fit_model(ctx.cal, ctx.prep, effects, segments=train, dq0=dq0)
+        fit = fit_model(ctx.prep, effects, segments=train, dq0=dq0)
         dq[name] = fit.x[:12]
         tr = evaluate(ctx, fit, train)
-        c, _ = heldout_chi2(ctx, fit, tr, test)
-        total += c
-    return total, dq
+        c, d = heldout_chi2(ctx, fit, tr, test)
+        total, dof = total + c, dof + d
+    return total, dof, dq
+
+
+def stance_count(ctx: Context) -> int:
+    return len({s.recording for s in ctx.prep.segments})
 
 
 def candidates(ctx: Context, names=None) -> tuple[list[str], list[str]]:
@@ -223,27 +227,32 @@ def _confound_entries(confounds: dict | None) -> list[dict]:
     return out
 
 
-def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
-    """The whole loop on one set of recordings; a JSON-ready report (radians, SI)."""
-    from legcal_bench.calibrators.interfoot import fit_model, start_confounds
-
+def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: Prepared | None = None) -> dict:
+    """The whole loop on one set of recordings (their training part: held-out sessions
+    are dropped); a JSON-ready report (radians, SI). `start`: offsets (rad, in the
+    robot's joint order) from any calibrator, where the framework's offsets-only fit
+    starts; `prep`: the prepared data, if not the framework's noise-weighted fit of
+    `recordings` (`prepare_sensor`)."""
     say = progress or (lambda msg: None)
-    ctx = context(cal, robot, recordings)
+    ctx = context(robot, recordings, prep)
     names = list(robot.joint_names)
     say("offsets-only fit")
-    base_fit = fit_model(cal, ctx.prep)
+    base_fit = fit_model(ctx.prep, start=start)
     base = evaluate(ctx, base_fit, ctx.prep.segments, keep_frames=True)
     sigma0 = _offsets_sigma(base)
     ln_n = float(np.log(base.n_rows))
     detection = {"chi2": base.chi2, "dof": base.dof, "chi2_per_dof": base.chi2 / base.dof,
                  "z": (base.chi2 - base.dof) / np.sqrt(2 * base.dof), "p_value": base.p_value}
-    if ctx.heldout:
-        detection["heldout"] = _gap(*heldout_chi2(ctx, base_fit, base, ctx.heldout), base)
     tried, notes = candidates(ctx, effects)
     steps, selected, ambiguous, confounded = [], [], [], {}
     current, current_fit = base, base_fit
-    base_folds = None
-    cv_current = None
+    base_folds, cv_current, cv_dof = None, None, 0
+    if stance_count(ctx) >= 2:
+        say("cross-validation (offsets only)")
+        cv_current, cv_dof, base_folds = _cv(ctx, (), None)
+        detection["cross_validation"] = _gap(cv_current, cv_dof, base)
+    else:
+        notes.append("cross-validation not run: it needs two stances or more")
     # Selection only once detection finds a residual the offsets do not explain: an
     # effect is not added to data the offsets-only model already fits within the noise.
     significant = _fires(detection)
@@ -251,7 +260,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
         notes.append("selection not run: the offsets-only model explains these data within the declared noise")
     # What these data cannot separate, per candidate, whether or not selection runs.
     for name in tried:
-        for c in _confound_entries(start_confounds(cal, ctx.prep, (name,), base_fit.x[:12])):
+        for c in _confound_entries(start_confounds(ctx.prep, (name,), base_fit.x[:12])):
             confounded.setdefault(c["effect"], c)
     while significant and len(selected) < MAX_EFFECTS:
         rows = []
@@ -259,7 +268,7 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
             if name in selected:
                 continue
             say(f"fit + {name}")
-            fit = fit_model(cal, ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
+            fit = fit_model(ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
             ev = evaluate(ctx, fit, ctx.prep.segments)
             k = ev.k - current.k
             d = current.chi2 - ev.chi2
@@ -271,13 +280,10 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
         for r in rows:
             r["passes_cv"] = None
         passing = [r for r in rows if r["passes_bic"] and r["moves_offsets"]]
-        if passing:
-            if cv_current is None:
-                say("cross-validation (offsets only)")
-                cv_current, base_folds = _cv(ctx, tuple(selected), None)
+        if passing and cv_current is not None:
             for r in passing:
                 say(f"cross-validation + {r['effect']}")
-                cv, _ = _cv(ctx, tuple(selected) + (r["effect"],), base_folds if not selected else None)
+                cv, _, _ = _cv(ctx, tuple(selected) + (r["effect"],), base_folds if not selected else None)
                 r["cv_chi2"] = cv
                 r["passes_cv"] = bool(cv < cv_current)
         steps.append({"on_top_of": list(selected), "cv_chi2_current": cv_current,
@@ -300,8 +306,8 @@ def diagnose(cal, robot, recordings, effects=None, progress=None) -> dict:
     final = evaluate(ctx, current_fit, ctx.prep.segments, keep_frames=True)
     after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
              "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
-    if ctx.heldout:
-        after["heldout"] = _gap(*heldout_chi2(ctx, current_fit, final, ctx.heldout), final)
+    if cv_current is not None:
+        after["cross_validation"] = _gap(cv_current, cv_dof, final)
     residual_left = _fires(after)
     excess = max(base.chi2 - base.dof, 1e-12)
     after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess
@@ -365,7 +371,8 @@ def summary_line(rep: dict) -> str:
     d = rep["detection"]
     where = rep["tracing"]["localization"]
     head = (f"offsets-only chi2/dof {d['chi2_per_dof']:.3f} (p = {d['p_value']:.2g}"
-            + (f"; held-out {d['heldout']['chi2_per_dof']:.3f}" if "heldout" in d else "") + ")")
+            + (f"; left-out stances {d['cross_validation']['chi2_per_dof']:.3f}" if "cross_validation" in d else "")
+            + ")")
     v = rep["verdict"]
     if v == "explained":
         return f"explained by the offsets within the declared noise: {head}"
@@ -458,9 +465,7 @@ def _extra_columns(ctx: Context, fit, effects) -> list[np.ndarray]:
     """Per effect of `effects` (instances, at zero), its Jacobian columns (N, 11, P) at
     `fit` over all the segments, the segment means re-estimated as for the fit's own
     columns (one evaluation for all)."""
-    from legcal_bench.calibrators.interfoot import frame_residuals
-
-    ex = frame_residuals(ctx.cal, ctx.prep, fit, ctx.prep.segments, extra=effects)
+    ex = frame_residuals(ctx.prep, fit, ctx.prep.segments, extra=effects)
     return [ex.J[:, :, ex.model.slices[e.name]] for e in effects]
 
 

@@ -25,10 +25,10 @@ import numpy as np
 from legcal_bench.calibrators.base import CalibrationResult
 from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import CalibrationError, RecordingError
-from legcal_bench.estimation.imu_motion import compensate
-from legcal_bench.estimation.levelling import up_in_base
-from legcal_bench.estimation.residuals import flat_ground_errors
-from legcal_bench.estimation.smoothing import smooth_wrenches
+from legcal_bench.estimation.imu.imu_motion import compensate
+from legcal_bench.estimation.imu.levelling import up_in_base
+from legcal_bench.estimation.problem.residuals import flat_ground_errors
+from legcal_bench.estimation.problem.smoothing import smooth_wrenches
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.geometry.poses import pos_quat_to_se3
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
@@ -167,8 +167,8 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
     simulator's true postures and vertical where the recordings keep a ground truth
     ("true"), else on the logged encoders and the IMU-levelled vertical ("logged").
     None without held-out recordings."""
-    from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects
-    from legcal_bench.estimation.residuals import foot_height_difference
+    from legcal_bench.estimation.modelgap.effects import EffectModel, EffectSegment, SegmentData, load_effects
+    from legcal_bench.estimation.problem.residuals import foot_height_difference
 
     kin = LegKinematics(legmap)
     names = legmap.joint_names

@@ -1,6 +1,6 @@
 """The hold screen: simulate a candidate stance before a protocol asks a robot for it.
 
-Stance design (`legcal_bench.estimation.design`) predicts information from the
+Stance design (`legcal_bench.estimation.information.design`) predicts information from the
 kinematics alone; whether the robot holds a stance is a question for the physics. The
 screen records the stance as `collect` would (the same fitting, placement and posture
 motion, `record_segment`), each case with the bench's injected condition on the

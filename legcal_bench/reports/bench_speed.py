@@ -35,6 +35,8 @@ TARGETS = {
                         lambda new, old: new <= 0.08 and old / new >= 2.0),
     "interfoot_end_to_end": ("inter-foot calibrate end to end (500 -> trim -> 450)", "<= 0.25 s",
                              lambda new, old: new <= 0.25),
+    "interfoot_end_to_end_operating": ("inter-foot calibrate end to end, setting operating", "–", None),
+    "interfoot_end_to_end_sensor": ("inter-foot calibrate end to end, setting sensor", "–", None),
     "interfoot_solve_2point": ("inter-foot solve, forward-difference Jacobian", "–", None),
     "interfoot_solve_alternating": ("inter-foot solve, the paper's alternation", "–", None),
     "yamane_solve_default": ("Yamane solve, 4 x 450 frames, default weights", "<= 0.25 s", lambda new, old: new <= 0.25),

@@ -37,9 +37,9 @@ def case_spec(case: str, seed: int) -> tuple[str, tuple[str, ...], str | None, s
 
 def true_departures(paths) -> dict[str, np.ndarray]:
     """Per stance recording, the truth's mean (tilt x, tilt y, height) of the right sole
-    in the left sole's frame (`legcal_bench.estimation.coplanarity.coplanarity`)."""
+    in the left sole's frame (`legcal_bench.estimation.checks.coplanarity.coplanarity`)."""
     from legcal_bench.data.recording import load_truth
-    from legcal_bench.estimation.coplanarity import coplanarity
+    from legcal_bench.estimation.checks.coplanarity import coplanarity
     from legcal_bench.geometry.poses import pos_quat_to_homogeneous
 
     out = {}
@@ -55,10 +55,11 @@ def true_departures(paths) -> dict[str, np.ndarray]:
 
 
 def run_case(robot: str, case: str, seed: int) -> dict:
-    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
     from legcal_bench.errors import HoldError
-    from legcal_bench.estimation.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
+    from legcal_bench.estimation.checks.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
@@ -76,7 +77,8 @@ def run_case(robot: str, case: str, seed: int) -> dict:
         paths = list_segments(Path(work) / "set")
         injected = np.asarray(load_truth(paths[0]).offsets)
         truth = true_departures(paths)
-        fits = {o: get_calibrator("interfoot", contact_check=o).calibrate(legmap, recs) for o in ("flag", "drop")}
+        fits = {o: calibrate_training(get_calibrator("interfoot", setting="operating", contact_check=o), legmap, recs)
+                for o in ("flag", "drop")}
     check = fits["flag"].diagnostics["contact_check"]["stances"]
     truly_off = sorted(n for n, c in truth.items() if np.hypot(*c[:2]) > MIN_TILT_RAD or abs(c[2]) > MIN_HEIGHT_M)
     stances = []
@@ -138,7 +140,7 @@ def summarize(rows: list[dict]) -> list[dict]:
 
 
 def markdown(data: dict, made_by: str, code: str) -> str:
-    from legcal_bench.estimation.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
+    from legcal_bench.estimation.checks.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
 
     lines = ["# The per-stance contact check", "",
              f"Made by `{made_by}` ({code}). `calibrated-imu` sensors, the paper's injection, `interfoot` "

@@ -11,7 +11,7 @@ from legcal_bench.files.plots import pyplot, save_figure
 
 
 def plot_design(result: dict, robot: str, path: str | Path) -> Path:
-    """`result` from `legcal_bench.estimation.design.design`."""
+    """`result` from `legcal_bench.estimation.information.design.design`."""
     plt = pyplot()
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(11, 4))
     names = list(result["default"]["std_deg"])

@@ -60,9 +60,10 @@ def true_parameters(reality_truth: list[dict]) -> dict[str, float]:
 
 def run_case(robot: str, effect: str | None, seed: int, stances: tuple[str, ...] = DEFAULT_STANCES) -> dict:
     """One session set (`stances` recorded) and its fits; `effect` None is a clean case."""
-    from legcal_bench.calibrators.base import get_calibrator
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
-    from legcal_bench.estimation.effects import EffectModel, load_effects
+    from legcal_bench.estimation.modelgap.effects import EffectModel, load_effects
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.scoring import heldout_heights
     from legcal_bench.protocol.collect import CollectConfig, collect
@@ -77,7 +78,7 @@ def run_case(robot: str, effect: str | None, seed: int, stances: tuple[str, ...]
         collect(cfg, Path(work) / "set", progress=False)
         recs = load_session(Path(work) / "set", robot=legmap)
         options = {"setting": "sensor"} if effect is None else {"setting": "sensor", "effects": effect}
-        result = get_calibrator("interfoot", **options).calibrate(legmap, recs)
+        result = calibrate_training(get_calibrator("interfoot", **options), legmap, recs)
         names = legmap.joint_names
         paths = list_segments(Path(work) / "set")
         truth = load_truth(paths[0])

@@ -16,7 +16,8 @@ from tqdm import tqdm
 
 from legcal_bench import paper
 from legcal_bench.benchmark.suites import G1_EXAMPLE
-from legcal_bench.calibrators.base import CalibrationResult, get_calibrator
+from legcal_bench.calibrators.base import CalibrationResult, calibrate_training
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.files.plots import pyplot, save_figure
@@ -52,7 +53,8 @@ class Reproduction:
 
     @staticmethod
     def run(lm, recs, **options) -> tuple[CalibrationResult, np.ndarray]:
-        res = get_calibrator("interfoot", **options).calibrate(lm, recs)
+        """interfoot with `options`; the paper's setting (operating) unless one is named."""
+        res = calibrate_training(get_calibrator("interfoot", **{"setting": "operating", **options}), lm, recs)
         return res, res.offsets_vector(lm.joint_names) - paper_injection(lm)
 
     @staticmethod

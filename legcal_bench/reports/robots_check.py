@@ -20,10 +20,12 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.base import calibrate_training
+
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import LegcalError
-from legcal_bench.estimation.datacheck import LIMITS, data_warnings, statistics
+from legcal_bench.estimation.checks.datacheck import LIMITS, data_warnings, statistics
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.reports import write_report
 from legcal_bench.protocol.collect import CollectConfig, collect
@@ -61,7 +63,7 @@ def _session(robot: str, mode: str, seed: int, folder: Path) -> tuple[dict, floa
             "sole_tilt_deg": max(max(h["sole_tilt_deg"]) for h in holds)}
     lm = load_robot(robot)
     recs = load_session(out, lm.joint_names)
-    res = get_calibrator("interfoot").calibrate(lm, recs)
+    res = calibrate_training(get_calibrator("interfoot", setting="operating"), lm, recs)
     recovery = score(str(out), res, lm)["recovery"]["rms_error_deg"] if mode == "weld" else None
     return hold, recovery, _data_check(lm, recs, res)
 
@@ -154,7 +156,7 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
         "",
         "## Data checks on clean data (false alarms)",
         "",
-        "The data checks (`legcal_bench.estimation.datacheck`, run by every built-in calibrator) on the same clean",
+        "The data checks (`legcal_bench.estimation.checks.datacheck`, run by every built-in calibrator) on the same clean",
         "sets, with the default inter-foot calibration's estimate: the largest |figure| over every recording and",
         "seed next to its warning limit, and the warnings raised (each one a false alarm).",
         "",

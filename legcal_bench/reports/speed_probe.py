@@ -24,7 +24,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 # 450, no trimming) for the solves; the default pipeline end to end.
 CALIBRATION_CASES = {
     "interfoot_solve": ("interfoot", dict(n_max=450, trim_fraction=0.0), "solve"),
-    "interfoot_end_to_end": ("interfoot", {}, "total"),
+    "interfoot_end_to_end": ("interfoot", {}, "total"),  # the default: operating before #35, sensor since
+    "interfoot_end_to_end_operating": ("interfoot", dict(setting="operating"), "total"),
+    "interfoot_end_to_end_sensor": ("interfoot", dict(setting="sensor"), "total"),
     "interfoot_solve_2point": ("interfoot", dict(n_max=450, trim_fraction=0.0, jacobian="2-point"), "solve"),
     "interfoot_solve_alternating": ("interfoot", dict(n_max=450, trim_fraction=0.0, solver="alternating"), "solve"),
     "yamane_solve_default": ("yamane", dict(n_max=450), "solve"),
@@ -34,13 +36,19 @@ CALIBRATION_CASES = {
 
 def probe(data: str, robot: str, repeats: int, collect_repeats: int) -> dict:
     import legcal_bench
-    from legcal_bench.calibrators.base import get_calibrator
+
+    try:  # the registry's home since #35; a baseline commit may be older (this file runs on both)
+        from legcal_bench.calibrators.registry import get_calibrator
+    except ImportError:
+        from legcal_bench.calibrators.base import get_calibrator
     from legcal_bench.data.recording import load_session
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
 
     lm = load_robot(robot)
-    recs = load_session(data, lm.joint_names)
+    # The training recordings, as the framework hands them over (`calibrate_training`; here by hand,
+    # since a baseline commit may predate it).
+    recs = [r for r in load_session(data, lm.joint_names) if r.kind in ("stance", "standing")]
     out: dict = {"module": os.path.dirname(legcal_bench.__file__), "cases": {}}
     for name, (cal, options, key) in CALIBRATION_CASES.items():
         runs = [get_calibrator(cal, **options).calibrate(lm, recs) for _ in range(repeats)]

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.base import calibrate_training
+
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
@@ -31,7 +33,7 @@ def main(robot: str, mode: str, seeds: int) -> None:
                     progress=False)
             recs = load_session(Path(work) / "s", robot=lm)
             injected = np.asarray(load_truth(list_segments(Path(work) / "s")[0]).offsets)
-            r = get_calibrator("interfoot", setting="sensor", effects="encoder_scale").calibrate(lm, recs)
+            r = calibrate_training(get_calibrator("interfoot", setting="sensor", effects="encoder_scale"), lm, recs)
             e = r.diagnostics["effects"]
             after = np.array([r.offsets_rad[n] for n in lm.joint_names])
             before = np.array([e["offsets_only_rad"][n] for n in lm.joint_names])

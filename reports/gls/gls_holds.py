@@ -1,7 +1,7 @@
 """Where does the generalized least squares help, and where does it hurt? Per set of the
 full suite's datasets (factory offsets + the paper's injection, realistic sensors):
 the whitened chi-square per degree of freedom at the generalized least-squares solution
-(`calibrators.interfoot.refine`), and the offsets RMS error of that solution and of the
+(`legcal_bench.estimation.problem.fit.refine`), and the offsets RMS error of that solution and of the
 row-weighted fit it starts from. The `sensor` setting uses the first only where the
 chi-square per dof is at most `GLS_MAX_CHI2_PER_DOF`.
 
@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.benchmark.plan import Dataset
-from legcal_bench.calibrators.base import get_calibrator
-from legcal_bench.calibrators.interfoot import GLS_MAX_CHI2_PER_DOF, fit_model, refine
+from legcal_bench.estimation.problem.stance import prepare_sensor
+from legcal_bench.estimation.problem.fit import GLS_MAX_CHI2_PER_DOF, fit_model, refine
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.errors import HoldError
 from legcal_bench.protocol.collect import collect
@@ -45,12 +45,11 @@ def main(robots: list[str]) -> None:
                         continue
                     recs = load_session(out, robot=lm)
                     truth = load_truth(list_segments(out)[0]).offsets
-                cal = get_calibrator("interfoot", setting="sensor")
-                prep = cal.prepare(lm, recs)
+                prep = prepare_sensor(lm, recs)
                 # The row-weighted fit as the setting starts it: `fit_model` refines only when
-                # `whitens(prep)` (the "sensor" setting), so any other name stops it there.
-                rows = fit_model(cal, replace(prep, setting_name="row-weighted"))
-                gls = refine(cal, prep, rows)
+                # `prep.whitens` (the "sensor" setting), so any other name stops it there.
+                rows = fit_model(replace(prep, setting_name="row-weighted"))
+                gls = refine(prep, rows)
                 err = [float(np.rad2deg(np.sqrt(np.mean((x[:12] - truth) ** 2)))) for x in (gls.fit.x, rows.x)]
                 print(f"| {lm.name} | {mode} | {seed} | {gls.chi2_per_dof:.3f} | {err[0]:.4f} | {err[1]:.4f} | "
                       f"{'yes' if gls.holds else 'no'} |", flush=True)

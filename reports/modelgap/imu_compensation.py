@@ -6,7 +6,7 @@ motion tilt and the declared per-frame tilt noise.
 
     python reports/modelgap/imu_compensation.py a3 a2 examples/unitree_g1.legmap.yaml
 
-(weld, `calibrated-imu`, seed 3, `legcal_bench.estimation.imu_motion` at its default window;
+(weld, `calibrated-imu`, seed 3, `legcal_bench.estimation.imu.imu_motion` at its default window;
 mrad RMS per tilt axis, as the declared noise, accel_noise_std / g, is stated.)
 "Above 1 Hz": the part left after a 0.5 s moving average is taken out, i.e. frame-to-frame
 scatter that no smooth model of the posture predicts. An error the declared noise does
@@ -22,8 +22,8 @@ import numpy as np
 from scipy.ndimage import uniform_filter1d
 
 from legcal_bench.data.recording import list_segments, load_session, load_truth
-from legcal_bench.estimation.imu_motion import compensate
-from legcal_bench.estimation.noise import noise_sigmas
+from legcal_bench.estimation.imu.imu_motion import compensate
+from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.geometry.poses import pos_quat_to_homogeneous
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot

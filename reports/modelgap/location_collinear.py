@@ -27,20 +27,18 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.benchmark.modelgap import _collect
-from legcal_bench.calibrators.base import get_calibrator
-from legcal_bench.calibrators.interfoot import fit_model
+from legcal_bench.estimation.problem.fit import fit_model
 from legcal_bench.evaluation.modelgap import context, evaluate, trace
 
 
 def main(robot: str, mode: str, seed: int) -> None:
-    cal = get_calibrator("interfoot", setting="sensor")
     with tempfile.TemporaryDirectory() as work:
         legmap, recs, _ = _collect(robot, (), seed, Path(work), mode)
-        ctx = context(cal, legmap, recs)
+        ctx = context(legmap, recs)
         rng = np.random.default_rng(0)
         print(f"{robot} {mode} seed {seed}, clean: left-leg location score (delta chi2 / dof)")
         for effects in ((), ("leg_length",)):
-            fit = fit_model(cal, ctx.prep, effects)
+            fit = fit_model(ctx.prep, effects)
             ev = evaluate(ctx, fit, ctx.prep.segments, keep_frames=True)
             n = len(ev.frames.r)
             loc = trace(ctx, ev)["locations"]["left leg"]

@@ -1,6 +1,6 @@
 """Can the data alone see the tilt error the accelerometer's motion compensation leaves?
 Per stance of clean sets: the compensated IMU vertical's scatter about its own smooth
-course (`legcal_bench.estimation.tilt_noise.vertical_scatter`, the estimate `diagnose`
+course (`legcal_bench.estimation.imu.tilt_noise.vertical_scatter`, the estimate `diagnose`
 uses), as a per-axis sigma, against the declared tilt noise (accel_noise_std / g). No
 truth is read: a robot team could run this on its own logs.
 
@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.data.recording import load_session
-from legcal_bench.estimation.noise import noise_sigmas
-from legcal_bench.estimation.tilt_noise import vertical_scatter
+from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.imu.tilt_noise import vertical_scatter
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics

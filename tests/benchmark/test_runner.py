@@ -13,7 +13,7 @@ import pytest
 from legcal_bench.benchmark import plan as planning
 from legcal_bench.benchmark.leaderboard import generate
 from legcal_bench.benchmark.runner import is_done, run
-from legcal_bench.calibrators.base import available_calibrators
+from legcal_bench.calibrators.registry import available_calibrators
 from legcal_bench.provenance import RESULTS_VERSION
 
 TINY = dict(stance_s=3.0, heldout_s=2.0, standing_s=1.0, heldout=1)

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.cli import main
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import CalibrationError

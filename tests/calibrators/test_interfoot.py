@@ -3,7 +3,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import CalibrationResult, available_calibrators, get_calibrator
+from legcal_bench.calibrators.base import CalibrationResult
+
+from legcal_bench.calibrators.registry import available_calibrators, get_calibrator
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import CalibrationError
@@ -48,7 +50,7 @@ def test_paper_alternation_stops_short_of_the_optimum_the_projected_solve_reache
 
 def test_result_json_round_trip_and_required_fields(tmp_path_factory, tmp_path):
     lm, recs, _ = _session(tmp_path_factory, "a3", mode="kinematic")
-    res = get_calibrator("interfoot").calibrate(lm, recs)
+    res = get_calibrator("interfoot", setting="operating").calibrate(lm, recs)
     back = CalibrationResult.load(res.save(tmp_path / "r.json"))
     assert back.offsets_rad == res.offsets_rad
     assert set(back.conditioning) >= {"kappa_J_data", "kappa_H_data", "kappa_H_reg", "eigenvalues_H_data"}

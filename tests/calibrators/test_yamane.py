@@ -4,7 +4,7 @@ the injection back."""
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import CalibrationError
 from legcal_bench.protocol.collect import CollectConfig, collect

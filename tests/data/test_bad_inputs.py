@@ -13,7 +13,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import CalibrationResult, get_calibrator
+from legcal_bench.calibrators.base import CalibrationResult
+
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.cli import main
 from legcal_bench.data.recording import load_recording, load_session
 from legcal_bench.errors import CalibrationError, LegMapError, RecordingError, SensorModelError
@@ -279,7 +281,7 @@ def test_the_four_default_stances_leave_nothing_undetermined(tmp_path, robot):
     (["--calibrator", "yamane", "--option", "w_h=-1"], r"option w_h=-1"),
     (["--calibrator", "yamane", "--option", "n_max=0"], r"option n_max=0"),
     (["--calibrator", "yamane", "--solver", "lm"], r"solver 'lm': use one of projected, sparse"),
-    (["--setting", "best"], r"setting 'best': use one of operating, sensor"),
+    (["--setting", "best"], r"setting 'best': use one of sensor, operating"),
     (["--solver", "newton"], r"solver 'newton': use projected \(default\) or alternating"),
     (["--calibrator", "nope"], r"unknown calibrator 'nope'; registered: \["),
     (["--robot", "a9"], r"unknown robot 'a9': use a built-in name .* or the path of a leg-map YAML"),

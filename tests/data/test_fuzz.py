@@ -14,7 +14,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import check_against_robot, load_recording
 from legcal_bench.errors import LegcalError
 from legcal_bench.protocol.collect import CollectConfig, collect

@@ -8,7 +8,7 @@ import pytest
 from legcal_bench.calibrators.interfoot import InterFootCalibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.errors import CalibrationError, ConfigError
-from legcal_bench.estimation.coplanarity import coplanarity
+from legcal_bench.estimation.checks.coplanarity import coplanarity
 from legcal_bench.geometry.lie import Exp
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.reports.contact_table import true_departures

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
-from legcal_bench.estimation.datacheck import data_warnings
+from legcal_bench.estimation.checks.datacheck import data_warnings
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.cli import main
-from legcal_bench.estimation.design import StanceInfo, greedy_design, stance_information
+from legcal_bench.estimation.information.design import StanceInfo, greedy_design, stance_information
 from legcal_bench.protocol.stances import STANCES
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 from legcal_bench.errors import CalibrationError
-from legcal_bench.estimation.effects import EffectModel, EffectSegment, SegmentData, load_effects, registry
-from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
-from legcal_bench.estimation.problem import Block, Problem
-from legcal_bench.estimation.terms import OFFSETS, FlatGroundTerm, InterFootTerm, SegmentKinematics
+from legcal_bench.estimation.modelgap.effects import EffectModel, EffectSegment, SegmentData, load_effects, registry
+from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.problem.problem import Block, Problem
+from legcal_bench.estimation.problem.terms import OFFSETS, FlatGroundTerm, InterFootTerm, SegmentKinematics
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
 

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session, load_truth
 from legcal_bench.errors import CalibrationError
-from legcal_bench.estimation.imu_motion import imu_acceleration
+from legcal_bench.estimation.imu.imu_motion import imu_acceleration
 from legcal_bench.geometry.poses import pos_quat_to_se3
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot

@@ -4,9 +4,9 @@ row and column layout, and the information matrix with per-frame blocks eliminat
 import numpy as np
 import pytest
 
-from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
-from legcal_bench.estimation.problem import Block, Problem, Term
-from legcal_bench.estimation.terms import (OFFSETS, TILT, FlatGroundTerm, ImuTiltTerm, InterFootTerm, KneePriorTerm,
+from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.problem.problem import Block, Problem, Term
+from legcal_bench.estimation.problem.terms import (OFFSETS, TILT, FlatGroundTerm, ImuTiltTerm, InterFootTerm, KneePriorTerm,
                                            SegmentKinematics, SoleHeightTerm, TikhonovTerm)
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics

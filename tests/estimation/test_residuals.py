@@ -3,8 +3,9 @@
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.interfoot import SETTINGS, _InterFootProblem, _Prepared
-from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
+from legcal_bench.calibrators.interfoot import SETTINGS
+from legcal_bench.estimation.problem.stance import Segment, StanceProblem
+from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots import load_robot
 
@@ -19,9 +20,9 @@ def problem():
         q = kin.q_init() + rng.normal(0, 0.08, (25, 12))
         acc = np.array([0.3, -0.2, 9.8]) + rng.normal(0, 0.3, (25, 3))
         up = up_in_base(acc, kin.R_BI)
-        segs.append(_Prepared(f"s{s}", q, up, levelling_rotations(up), np.arange(25)))
+        segs.append(Segment(f"s{s}", q, up, levelling_rotations(up), np.arange(25)))
     w = SETTINGS["a2_operating"]
-    return _InterFootProblem(kin, segs, w, prior=np.array([0.01, -0.02]), knees=[3, 9], bound=0.08)
+    return StanceProblem(kin, segs, w, prior=np.array([0.01, -0.02]), knees=[3, 9], bound=0.08)
 
 
 @pytest.mark.parametrize("mode", ["projected", "fixed"])

@@ -4,8 +4,8 @@ exactly in both."""
 
 import numpy as np
 
-from legcal_bench.estimation.residuals import project_mean
-from legcal_bench.estimation.signatures import project_means
+from legcal_bench.estimation.problem.residuals import project_mean
+from legcal_bench.estimation.modelgap.signatures import project_means
 from legcal_bench.geometry.lie import Jl_inv
 
 

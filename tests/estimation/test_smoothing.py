@@ -1,11 +1,11 @@
-"""Smoothing on the logged time grid (`legcal_bench.estimation.smoothing`): a slow signal
+"""Smoothing on the logged time grid (`legcal_bench.estimation.problem.smoothing`): a slow signal
 passes, white noise's variance drops by the quadratic Savitzky-Golay factor, gaps and
 short segments are handled."""
 
 import numpy as np
 import pytest
 
-from legcal_bench.estimation.smoothing import FT_WINDOW_S, savgol_resampled, smooth_wrenches
+from legcal_bench.estimation.problem.smoothing import FT_WINDOW_S, savgol_resampled, smooth_wrenches
 
 RATE = 50.0
 

@@ -7,7 +7,7 @@ from types import SimpleNamespace
 import numpy as np
 from scipy.signal import savgol_coeffs
 
-from legcal_bench.estimation.tilt_noise import measured_tilt_noise, vertical_scatter
+from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise, vertical_scatter
 
 G = 9.81
 RATE = 50.0

@@ -4,8 +4,8 @@ an explicit refit."""
 
 import numpy as np
 
-from legcal_bench.estimation.lineartests import chi2_after, score
-from legcal_bench.estimation.whitening import expected_rows, frame_covariances, whiten
+from legcal_bench.estimation.modelgap.lineartests import chi2_after, score
+from legcal_bench.estimation.information.whitening import expected_rows, frame_covariances, whiten
 
 
 def test_whitened_noise_drawn_from_a_rank_8_covariance_is_chi2_8():

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.protocol.collect import CollectConfig, collect

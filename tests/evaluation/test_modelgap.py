@@ -2,7 +2,6 @@
 by the offsets, a library effect is found and named, an edit outside the library is
 "unexplained" and located on the edited leg, never confidently misnamed."""
 
-from legcal_bench.calibrators.base import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.evaluation.modelgap import diagnose
 from legcal_bench.protocol.collect import CollectConfig, collect
@@ -14,14 +13,15 @@ def _diagnose(tmp_path, effect, seed=0, effects=None):
     collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=seed,
                           effects=() if effect is None else (effect,)), tmp_path / "set", progress=False)
     recs = load_session(tmp_path / "set", robot=lm)
-    return diagnose(get_calibrator("interfoot", setting="sensor"), lm, recs, effects=effects)
+    return diagnose(lm, recs, effects=effects)
 
 
 def test_clean_data_are_explained_by_the_offsets(tmp_path):
     rep = _diagnose(tmp_path, None)
     assert rep["verdict"] == "explained" and not rep["selected"]
     assert abs(rep["detection"]["z"]) < 5  # chi2 / dof within noise of 1: the noise model is carried right
-    gap = rep["detection"]["heldout"]  # held-out over training chi2/dof, tested against F
+    # Each stance left out, predicted from the others, over training chi2/dof, tested against F.
+    gap = rep["detection"]["cross_validation"]
     assert abs(gap["ratio_to_training"] - 1) < 0.05 and gap["p_value"] > 0.005
     assert rep["steps"] == [] and any("selection not run" in n for n in rep["notes"])  # nothing to explain
     # The IMU tilt noise measured from the data (A3-like weld: the compensation leaves
@@ -56,7 +56,7 @@ def test_diagnose_refuses_recordings_that_declare_no_noise(tmp_path):
     lm = load_robot("a3")
     collect(CollectConfig(robot="a3", mode="weld", sensors="zero", seed=0), tmp_path / "set", progress=False)
     with pytest.raises(CalibrationError, match=r"encoder_noise_std.*diagnose.*--sensors realistic"):
-        diagnose(get_calibrator("interfoot", setting="sensor"), lm, load_session(tmp_path / "set", robot=lm))
+        diagnose(lm, load_session(tmp_path / "set", robot=lm))
 
 
 def test_diagnose_cli_errors_name_the_fix(tmp_path, capsys):
@@ -96,14 +96,14 @@ def test_a_clean_leg_length_fit_leaves_no_structure_for_the_location_test(tmp_pa
     # leg's generic geometry reach directions only through combinations that the noise
     # alone moves off exact collinearity; tested at full weight (and with plain-average
     # mean columns) the left leg scored 1185 on 26 dof here. Now within noise.
-    from legcal_bench.calibrators.interfoot import fit_model
+    from legcal_bench.estimation.problem.fit import fit_model
     from legcal_bench.evaluation.modelgap import _structured, context, evaluate, trace
 
     lm = load_robot("a3")
     collect(CollectConfig(robot="a3", mode="kinematic", sensors="calibrated-imu", seed=3), tmp_path / "set",
             progress=False)
-    ctx = context(get_calibrator("interfoot", setting="sensor"), lm, load_session(tmp_path / "set", robot=lm))
-    fit = fit_model(ctx.cal, ctx.prep, ("leg_length",))
+    ctx = context(lm, load_session(tmp_path / "set", robot=lm))
+    fit = fit_model(ctx.prep, ("leg_length",))
     tracing = trace(ctx, evaluate(ctx, fit, ctx.prep.segments, keep_frames=True))
     assert not _structured(tracing), tracing["locations"]
     for loc in tracing["locations"].values():

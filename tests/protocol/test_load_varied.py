@@ -6,11 +6,10 @@ its encoder scale."""
 import numpy as np
 import pytest
 
-from legcal_bench.calibrators.base import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.errors import ConfigError
-from legcal_bench.estimation.effects import joint_loads
-from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.estimation.modelgap.effects import joint_loads
+from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.protocol.stances import (LOAD_STANCES, PUSH_PERIOD_S, STANCES, commanded_soles, load_protocol,
@@ -61,14 +60,14 @@ def _set(tmp_path, stances, robot="a3"):
 
 
 def test_the_pushing_stances_vary_the_loads_and_part_knee_compliance_from_encoder_scale(tmp_path):
-    import calibrators.interfoot as interfoot
+    from legcal_bench.estimation.problem.fit import fit_model, start_confounds
+    from legcal_bench.estimation.problem.stance import prepare_sensor
 
     def knee_cosine(stances):
         legmap, recs = _set(tmp_path, stances)
-        cal = get_calibrator("interfoot", setting="sensor")
-        prep = cal.prepare(legmap, recs)
-        dq0 = interfoot.fit_model(cal, prep).x
-        rep = interfoot.start_confounds(cal, prep, ("compliance", "encoder_scale"), dq0)
+        prep = prepare_sensor(legmap, recs)
+        dq0 = fit_model(prep).x
+        rep = start_confounds(prep, ("compliance", "encoder_scale"), dq0)
         p = rep["effects"]["compliance"]["parameters"]["compliance.left_knee"]["closest_beyond_offsets"]
         return p, legmap, recs
 

@@ -5,7 +5,7 @@ block costs the offsets' posterior much less."""
 
 import numpy as np
 
-from legcal_bench.calibrators.base import get_calibrator
+from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.protocol.stances import STANCES

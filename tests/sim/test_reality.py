@@ -6,8 +6,8 @@ import pytest
 
 from legcal_bench.data.recording import load_recording, load_truth
 from legcal_bench.errors import ConfigError
-from legcal_bench.estimation.effects import joint_loads
-from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.estimation.modelgap.effects import joint_loads
+from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics

@@ -44,7 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from legcal_bench.data.recording import Recording
-from legcal_bench.estimation.levelling import up_in_base
+from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.geometry.lie import Log, frechet_mean, inverse
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.smoothing import savgol_resampled
+from legcal_bench.estimation.problem.smoothing import savgol_resampled
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 IMU_WINDOW_S = 0.75  # smoothing window of the second derivative (0.5-1 s works: the motion is ~10 s slow)

@@ -29,9 +29,9 @@ import numpy as np
 from tqdm import tqdm
 
 from legcal_bench.errors import ConfigError, IKError
-from legcal_bench.estimation.levelling import levelling_rotations
-from legcal_bench.estimation.noise import noise_sigmas
-from legcal_bench.estimation.residuals import flat_residuals
+from legcal_bench.estimation.imu.levelling import levelling_rotations
+from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.problem.residuals import flat_residuals
 from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.protocol.stances import Stance, feasible_trajectory, fit_stance, place
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.levelling import levelling_rotations, up_in_base
-from legcal_bench.estimation.residuals import flat_residuals
+from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.problem.residuals import flat_residuals
 from legcal_bench.paper import MATCHED_UNIT_SCALE
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 

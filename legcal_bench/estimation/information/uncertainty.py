@@ -1,7 +1,7 @@
 """Posterior uncertainty of a fit: what the data determine, and what they do not.
 
 From the data-only information matrix H of the offsets, with every residual row
-divided by its declared noise level (`legcal_bench.estimation.noise`), the posterior
+divided by its declared noise level (`legcal_bench.estimation.information.noise`), the posterior
 covariance is H^-1 (first order, frames taken as independent). Reported: the standard
 deviation of each offset, of each leg's pitch sum and of their difference, and every
 combination (eigenvector of H^-1) whose standard deviation exceeds `STD_LIMIT_RAD`:
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.observability import describe_combination
+from legcal_bench.estimation.information.observability import describe_combination
 from legcal_bench.robots.design import PITCH_ROLES
 from legcal_bench.robots.kinematics import pitch_sums
 

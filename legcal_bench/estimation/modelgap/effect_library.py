@@ -14,7 +14,7 @@ each an `Effect` plug-in (entry-point group `legcal_bench.effects`).
   hip_axis       the hip-pitch axis of each leg rotated about the hip's x and z axes (rad)
 
 Which of these parameters the data can separate from the offsets is not written here:
-the confound report (`legcal_bench.estimation.confounds`) computes it for the robot and
+the confound report (`legcal_bench.estimation.modelgap.confounds`) computes it for the robot and
 data at hand (the IMU pitch tilt, for one, is equal hip-pitch offsets on a pitch-first
 hip, and separable on a roll-first one).
 """
@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.effects import Effect, SegmentData, joint_loads
+from legcal_bench.estimation.modelgap.effects import Effect, SegmentData, joint_loads
 from legcal_bench.errors import CalibrationError
 from legcal_bench.robots.chain import link_direction
 from legcal_bench.robots.design import PITCH_ROLES

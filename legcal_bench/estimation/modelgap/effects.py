@@ -16,7 +16,7 @@ each effect's block) and `EffectSegment` evaluates a contact segment's kinematic
 them; the inter-foot and flat-ground terms take it in place of `SegmentKinematics`.
 
 Effects are plug-ins, like calibrators: the entry-point group `legcal_bench.effects`
-maps a name to an `Effect` subclass (the library: `legcal_bench.estimation.effect_library`).
+maps a name to an `Effect` subclass (the library: `legcal_bench.estimation.modelgap.effect_library`).
 """
 
 from __future__ import annotations

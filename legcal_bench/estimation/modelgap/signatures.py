@@ -1,6 +1,6 @@
 """Candidate signatures for tracing a residual (issue #17): columns that a physical
 cause would add to the residual, scored against the whitened residual by
-`legcal_bench.estimation.lineartests.score` (no fit, no library needed).
+`legcal_bench.estimation.modelgap.lineartests.score` (no fit, no library needed).
 
   leg geometry   a generic error of one leg's chain: a 6-dof twist after each of its
                  joints (`LegGeometry`, an effect with factors, not a library effect:
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.effects import Effect
-from legcal_bench.estimation.residuals import project_mean
+from legcal_bench.estimation.modelgap.effects import Effect
+from legcal_bench.estimation.problem.residuals import project_mean
 from legcal_bench.robots.kinematics import LegKinematics
 
 FAMILIES = ("angle", "load", "motion")

@@ -3,7 +3,7 @@
 Per contact segment, on the raw encoders (filtering is not repeated after correction):
   0. beyond the paper, IMU motion compensation (`imu="compensated"`, the default): the
      IMU's acceleration predicted from the leg angles is removed from the accelerometer
-     (`legcal_bench.estimation.imu_motion`) in recordings logged while moving (not in
+     (`legcal_bench.estimation.imu.imu_motion`) in recordings logged while moving (not in
      those declared `motion: static`); `imu="raw"` is the paper's setting;
   1. drop frames with a non-finite value;
   2. gyro guard: drop frames whose IMU rate exceeds 0.5 rad/s; beyond the paper, an
@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.cluster.vq import kmeans2
 
-from legcal_bench.estimation.imu_motion import IMU_WINDOW_S, compensate
+from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S, compensate
 from legcal_bench.geometry.lie import Exp, Log, frechet_mean, inverse
 from legcal_bench.paper import (GYRO_GUARD_RAD_S, LOCAL_MEAN_WINDOW_S, N_MAX_PER_STANCE,
                                 ROTATION_RESIDUAL_MAX_DEG)

@@ -2,7 +2,7 @@
 
 The kinematics they start from (C_k, its Jacobian G_k, sole poses and Jacobians) is
 `legcal_bench.robots.kinematics.frame_kinematics`; the IMU vertical is
-`legcal_bench.estimation.levelling`.
+`legcal_bench.estimation.imu.levelling`.
 
 For frame k of contact segment s, with corrected angles q_k = q_enc_k + dq:
 
@@ -66,7 +66,7 @@ def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with
 
 
 def flat_residuals_extended(ek, up0: np.ndarray, R_WB0: np.ndarray):
-    """`flat_residuals` with model-gap effects (`legcal_bench.estimation.effects.
+    """`flat_residuals` with model-gap effects (`legcal_bench.estimation.modelgap.effects.
     ExtendedKinematics`): sole Jacobians over all n columns and the IMU's vertical
     corrected, up = Q up0 and R_WB = R_WB0 Q^T, with dQ = Q [w]x per column (w in imu_W).
     Returns (N, 5) residuals and (N, 5, n) Jacobians."""

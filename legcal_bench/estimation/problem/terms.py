@@ -17,8 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.problem import Term
-from legcal_bench.estimation.residuals import feet_residuals, flat_residuals, flat_residuals_extended
+from legcal_bench.estimation.problem.problem import Term
+from legcal_bench.estimation.problem.residuals import feet_residuals, flat_residuals, flat_residuals_extended
 from legcal_bench.geometry.lie import frechet_mean
 from legcal_bench.robots.kinematics import FrameKinematics, LegKinematics, frame_kinematics
 
@@ -29,7 +29,7 @@ TILT = "tilt"  # Yamane's per-frame root roll and pitch
 class SegmentKinematics:
     """A segment's encoder frames and their kinematics at the offsets last asked for.
     The terms' segment interface: `blocks`, `state(x)` (kinematics at the block values)
-    and `split(J)` (Jacobian columns by block); `legcal_bench.estimation.effects.
+    and `split(J)` (Jacobian columns by block); `legcal_bench.estimation.modelgap.effects.
     EffectSegment` is the same with model-gap effects."""
 
     blocks = (OFFSETS,)

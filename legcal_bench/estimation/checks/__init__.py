@@ -1,0 +1,1 @@
+"""Data checks: what a recording measures before a fit, and the per-stance contact check after."""

@@ -1,0 +1,65 @@
+"""The per-stance contact check on a fit: were each stance's soles on one flat floor?
+(`legcal_bench.estimation.checks.coplanarity` judges one stance; this runs it on the
+stance problem, every stance tested against the others.)"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances
+from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.information.whitening import frame_covariances, whitening
+from legcal_bench.estimation.problem.fit import declared_noise, frame_residuals, offsets_fit
+from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights
+
+CONTACT_CHECKS = ("flag", "drop", "off")
+
+
+def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray) -> list[StanceContact] | None:
+    """The per-stance coplanarity check of `segments` (a fit's, after trimming), from
+    offsets `dq0`: on the noise-weighted problem without priors whatever the fit's
+    setting (a prior's pull would show as a departure), stances tested against the
+    others; the worst flagged stance is set aside and the rest tested again without it,
+    while three or more remain (one bad stance would otherwise spoil the others'
+    predictions). None when the recordings declare no noise to judge it against or have
+    a single stance."""
+    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
+    if sig is None or len({s.recording for s in segments}) < 2:
+        return None
+    problem = StanceProblem(prep.kin, segments, noise_weights(declared_noise(prep)), None, [], prep.options.bound)
+    dq, _ = problem.solve(dq0, prep.options)
+    final: dict[str, StanceContact] = {}
+    while True:
+        results = _stance_contacts(prep, problem, dq, sig)
+        bad = [c for c in results if c.flagged]
+        if not bad or len(results) <= 2:
+            final.update({c.recording: c for c in results})
+            break
+        worst = max(bad, key=lambda c: c.chi2)
+        final[worst.recording] = worst
+        problem.build([s for s in problem.segments if s.recording != worst.recording])
+        dq, _ = problem.solve(dq, prep.options)
+    return [final[n] for n in dict.fromkeys(s.recording for s in segments)]
+
+
+def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[StanceContact]:
+    segs = problem.segments
+    names = list(dict.fromkeys(s.recording for s in segs))
+    fr = frame_residuals(prep, offsets_fit(prep, dq, segs), segs)
+    W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
+    Jw = W @ fr.J[:, :, :12]
+    info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
+    total = sum(info.values())
+    means = problem.means_at(dq)
+    r, J = problem.evaluate(dq, "projected")
+    owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
+    # The offsets' change without each stance: one Gauss-Newton step on the other rows.
+    delta = {n: -np.linalg.lstsq(J[owner != n], r[owner != n], rcond=None)[0] for n in names}
+    items = []
+    for i, s in enumerate(segs):
+        m = fr.segment == i
+        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12],
+                      "delta": delta[s.recording],
+                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True),
+                      "left_tilt": fr.r[m, 7:9].mean(axis=0)})
+    return check_stances(items, sig["encoder"])

@@ -1,0 +1,1 @@
+"""The model gap: effects the offsets-only model lacks, their library, confounds and score tests."""

@@ -1,0 +1,329 @@
+"""The contact-constrained problem of static double support, as the framework fits it.
+
+Per contact segment (a stretch of one stance recording where the feet stayed put) an
+inter-foot term (the left-to-right foot transform from forward kinematics against the
+segment's Fréchet mean) and a flat-ground term (both soles level in the IMU's
+vertical), over one shared offsets block; optionally a Tikhonov and a knee-prior term,
+and the blocks of model-gap effects. Any calibrator's offsets can start it; the
+framework's model gap, contact check and generalized least squares run on it.
+
+- `InterFootWeights`: the rows' weights (per residual type, or 1/sigma per row);
+  `MATCHED` unit weights, `sensor_weights` the declared noise's;
+- `Segment`, `segments_of`: the frames a fit uses, with their IMU vertical;
+- `FitOptions`: solver, Jacobian, tolerance, bound, trimming;
+- `Prepared`, `prepare`: the training recordings ready to fit;
+- `StanceProblem`: the weighted objective, solved by variable projection (the segment
+  means re-estimated inside the residual) or by the paper's alternation.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from legcal_bench import paper
+from legcal_bench.data.recording import Recording
+from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
+from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.modelgap.effects import EffectModel, EffectSegment, SegmentData
+from legcal_bench.estimation.problem.preprocess import PreprocessConfig, filter_warnings, select_frames
+from legcal_bench.estimation.problem.problem import Block, Problem
+from legcal_bench.estimation.problem.smoothing import smooth_wrenches
+from legcal_bench.estimation.problem.terms import (OFFSETS, FlatGroundTerm, HeldParametersTerm, InterFootTerm,
+                                                   KneePriorTerm, SegmentKinematics, TikhonovTerm)
+from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.legmap import LegMap
+
+SENSOR = "sensor"  # the setting whose rows are whitened by the declared noise (then the GLS)
+SOLVERS = ("projected", "alternating")
+JACOBIANS = ("analytic", "2-point")
+
+
+@dataclass(frozen=True)
+class InterFootWeights:
+    lambda_f: float
+    lambda_g: float
+    lambda_q: float
+    lambda_knee: float
+    w_q: tuple[float, ...]  # per leg, in the platform's joint order (left leg; mirrored to the right)
+    unit_scale: float = 1.0  # residual units: 1 = metres and radians, 1000 = mm and mrad
+    # Per-row 1/sigma instead of unit_scale (the "sensor" setting): feet translation,
+    # feet rotation, flat height, flat normal.
+    row_sigmas: tuple[float, float, float, float] | None = None
+
+
+# Both residual types at unit weight in mm and mrad, no priors.
+MATCHED = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1, 1, 1, 1, 1, 1), unit_scale=paper.MATCHED_UNIT_SCALE)
+
+
+def noise_weights(sig: dict) -> InterFootWeights:
+    """Each row divided by its declared noise level (`noise_sigmas`), no priors."""
+    return InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
+        sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
+
+
+def sensor_weights(legmap: LegMap, recordings: list[Recording], **overrides) -> tuple[str, InterFootWeights]:
+    """("sensor", the declared noise's weights), or ("matched", `MATCHED`) for recordings
+    that declare no noise (noise-free data: any weighting reaches the same optimum)."""
+    sig = noise_sigmas(recordings[0].sensor_model, LegKinematics(legmap).dims.leg_length) if recordings else None
+    if sig is None:
+        return "matched", replace(MATCHED, **overrides)
+    return SENSOR, replace(noise_weights(sig), **overrides)
+
+
+@dataclass(frozen=True)
+class FitOptions:
+    """How the problem is solved: `solver` "projected" (variable projection, reaches the
+    optimum) or "alternating" (the paper's: means, then a bounded inner solve with them
+    held); the Jacobian analytic or forward differences; |offset| <= `bound`; after the
+    first solve the `trim_fraction` of each segment's frames with the largest residual
+    is dropped and the problem solved again."""
+
+    solver: str = "projected"
+    jacobian: str = "analytic"
+    tol: float = 1e-10
+    bound: float = paper.OFFSET_BOUND_RAD
+    max_outer: int = paper.OUTER_MAX_ITERATIONS
+    trim_fraction: float = paper.TRIM_FRACTION
+
+
+@dataclass
+class Segment:
+    """One contact segment's frames: encoder angles, the IMU's up vector in the pelvis
+    frame and the levelling rotations, the frames' sample indices, the ankle wrenches
+    (N, 2, 6) if recorded, and the stance recording it comes from."""
+
+    name: str
+    q_enc: np.ndarray
+    up_B: np.ndarray
+    R_WB: np.ndarray
+    frames: np.ndarray
+    ft: np.ndarray | None = None
+    recording: str = ""
+
+    def subset(self, keep: np.ndarray) -> "Segment":
+        return Segment(self.name, self.q_enc[keep], self.up_B[keep], self.R_WB[keep], self.frames[keep],
+                       None if self.ft is None else self.ft[keep], self.recording)
+
+
+def segments_of(kin: LegKinematics, recordings: list[Recording],
+                preprocess: PreprocessConfig) -> tuple[list[Segment], list]:
+    """Each recording's contact segments after the frame selection (`select_frames`)
+    with its IMU vertical; (segments, filter reports)."""
+    segments, reports = [], []
+    for r in recordings:
+        segs, rep = select_frames(kin, r.name, r.time, r.q_enc, r.imu_acc, r.imu_gyro, preprocess, r.motion)
+        reports.append(rep)
+        for s in segs:
+            up = up_in_base(s.imu_acc, kin.R_BI)
+            ft = None
+            if r.ft is not None:  # smoothed over the segment's span: noisy loads bias a compliance low
+                a, b = int(s.frames.min()), int(s.frames.max()) + 1
+                ft = smooth_wrenches(r.time[a:b], r.ft[a:b])[s.frames - a]
+            segments.append(Segment(s.name, s.q_enc, up, levelling_rotations(up), s.frames, ft, r.name))
+    return segments, reports
+
+
+@dataclass
+class Prepared:
+    """Training recordings ready to fit: the stances' segments, the weights and the
+    setting they came from, the knee prior (or None), the filter reports, the warnings
+    so far and the solve options."""
+
+    robot: LegMap
+    kin: LegKinematics
+    stances: list[Recording]
+    segments: list[Segment]
+    w: InterFootWeights
+    setting_name: str
+    prior: np.ndarray | None
+    knees: list[int]
+    reports: list
+    warnings: list[str]
+    options: FitOptions = field(default_factory=FitOptions)
+
+    @property
+    def whitens(self) -> bool:
+        """Does a fit end with the generalized least squares (rows weighed by the
+        declared noise)?"""
+        return self.setting_name == SENSOR
+
+
+def prepare(robot: LegMap, recordings: list[Recording], w: InterFootWeights, setting_name: str,
+            preprocess: PreprocessConfig | None = None, options: FitOptions | None = None,
+            knee_prior_shift_rad: float = 0.0) -> Prepared:
+    """The stance recordings' segments with weights `w`; the knee prior (when
+    `w.lambda_knee` > 0) from the straight-leg standing recordings."""
+    preprocess = preprocess or PreprocessConfig()
+    kin = LegKinematics(robot)
+    warnings: list[str] = []
+    for r in recordings:
+        if r.joint_names != robot.joint_names:
+            raise CalibrationError(f"recording {r.name}: joint names do not match robot {robot.name}")
+    stances = [r for r in recordings if r.kind == "stance"]
+    if not stances:
+        raise CalibrationError("no stance recordings (kind 'stance'): record at least one static "
+                               "double-support stance, better four (I-IV)")
+    segments, reports = segments_of(kin, stances, preprocess)
+    warnings += filter_warnings(reports)
+    if not segments:
+        raise CalibrationError("no usable frames in any stance after filtering: "
+                               + "; ".join(f"{r.name}: {r.text()}" for r in reports))
+    knees = [i for i, role in enumerate(robot.joint_roles) if role == "knee"]
+    prior = None
+    standing = [r for r in recordings if r.kind == "standing"]
+    if w.lambda_knee > 0:
+        if standing:
+            q_knee = np.concatenate([r.q_enc[:, knees] for r in standing]).mean(axis=0)
+            prior = robot.knee_straight_rad - q_knee + knee_prior_shift_rad
+        else:
+            warnings.append("no straight-leg standing recording: knee prior disabled (lambda_knee -> 0)")
+            w = replace(w, lambda_knee=0.0)
+    return Prepared(robot, kin, stances, segments, w, setting_name, prior, knees, reports, warnings,
+                    options or FitOptions())
+
+
+def prepare_sensor(robot: LegMap, recordings: list[Recording], preprocess: PreprocessConfig | None = None,
+                   options: FitOptions | None = None) -> Prepared:
+    """`prepare` with the declared noise's weights (`sensor_weights`): the framework's
+    own fit, whatever calibrator made the offsets it starts from."""
+    name, w = sensor_weights(robot, recordings)
+    return prepare(robot, recordings, w, name, preprocess, options)
+
+
+class StanceProblem:
+    """The weighted objective as terms over the offsets block, per contact segment an
+    inter-foot term and a flat-ground term (rows in that order), then the priors. With
+    an `EffectModel`, every segment's kinematics carries the effects (their blocks
+    follow the offsets; `q_ref` are the offsets at which effects evaluate loads) and
+    `held` parameters are pinned at zero."""
+
+    def __init__(self, kin: LegKinematics, segments: list[Segment], w: InterFootWeights, prior=None, knees=(),
+                 bound: float = paper.OFFSET_BOUND_RAD, model: EffectModel | None = None,
+                 q_ref: np.ndarray | None = None, held: tuple[int, ...] = ()):
+        self.kin, self.w, self.prior, self.knees, self.bound = kin, w, prior, list(knees), bound
+        self.model, self.q_ref, self.held = model, q_ref, tuple(held)
+        self.n = 12 if model is None else model.n
+        if w.row_sigmas is None:
+            self.sf = np.sqrt(w.lambda_f) * w.unit_scale * np.ones(6)
+            self.sg = np.sqrt(w.lambda_g) * w.unit_scale * np.ones(5)
+        else:
+            st, sr, sh, sn = w.row_sigmas
+            self.sf = np.sqrt(w.lambda_f) * np.array([1 / st] * 3 + [1 / sr] * 3)
+            self.sg = np.sqrt(w.lambda_g) * np.array([1 / sh] + [1 / sn] * 4)
+        # Prior rows share the residual units (rad, or mrad in the matched setting).
+        self.wq = np.sqrt(w.lambda_q) * w.unit_scale * np.array(list(w.w_q) * 2, dtype=float)
+        self.sk = np.sqrt(w.lambda_knee) * w.unit_scale
+        self.build(segments)
+
+    @classmethod
+    def of(cls, prep: Prepared, segments: list[Segment] | None = None, **kw) -> "StanceProblem":
+        """The problem of `prep` (its weights, prior and bound) over `segments`."""
+        return cls(prep.kin, prep.segments if segments is None else segments, prep.w, prep.prior, prep.knees,
+                   prep.options.bound, **kw)
+
+    def build(self, segments: list[Segment]) -> None:
+        self.segments = segments
+        self.feet, terms = [], []
+        for seg in segments:
+            if self.model is None:
+                sk = SegmentKinematics(self.kin, seg.q_enc)
+            else:
+                sk = EffectSegment(self.model, SegmentData(seg.q_enc, seg.ft, seg.up_B,
+                                                           q_ref=seg.q_enc + self.q_ref))
+            feet = InterFootTerm(f"{seg.name}/feet", sk, self.sf)
+            self.feet.append(feet)
+            terms += [feet, FlatGroundTerm(f"{seg.name}/flat", sk, seg.up_B, seg.R_WB, self.sg)]
+        if self.w.lambda_q > 0:
+            terms.append(TikhonovTerm(self.wq))
+        if self.prior is not None and self.w.lambda_knee > 0:
+            terms.append(KneePriorTerm(self.knees, self.prior, self.sk))
+        blocks = [Block(OFFSETS, 12, bound=self.bound)]
+        if self.model is not None:
+            blocks += [Block(name, size) for name, size in self.model.blocks]
+            if self.held:
+                terms.append(HeldParametersTerm(self.model, self.held))
+        self.problem = Problem(blocks, terms)
+
+    @property
+    def n_data_rows(self) -> int:
+        return 11 * sum(len(s.frames) for s in self.segments)
+
+    def prior_hessian(self) -> np.ndarray:
+        H = np.diag(self.wq**2)
+        if self.prior is not None and self.w.lambda_knee > 0:
+            H[self.knees, self.knees] += self.sk**2
+        return H
+
+    def means_at(self, x: np.ndarray) -> list:
+        values = self.problem.unpack(x) if len(x) > 12 else x
+        return [t.update_mean(values) for t in self.feet]
+
+    def evaluate(self, dq: np.ndarray, mode: str):
+        """Stacked residual and Jacobian with the segment means re-estimated
+        ("projected") or held at their last values ("fixed")."""
+        for t in self.feet:
+            t.mode = mode
+        return self.problem.evaluate(dq)
+
+    def solve(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list]:
+        lb, ub = -opts.bound * np.ones(12), opts.bound * np.ones(12)
+        x0 = np.array(dq0, dtype=float)
+        x0[:12] = np.clip(x0[:12], lb + 1e-12, ub - 1e-12)
+        history = []
+        if opts.solver == "projected":
+            for t in self.feet:
+                t.mode = "projected"
+            # MINPACK's Levenberg-Marquardt is fastest here; the bounds are honoured by
+            # re-solving with the bounded trust-region method if they would be active.
+            sol = self.problem.solve(x0, method="lm", tol=opts.tol, jac=opts.jacobian,
+                                     max_nfev=100 if opts.jacobian == "analytic" else 2000,
+                                     on_jacobian=lambda x: history.append(x.tolist()))
+            history.append(sol.x.tolist())
+            return sol.x, history
+        # The paper's alternation: means from the current dq, then a bounded inner solve.
+        x = x0
+        for _ in range(opts.max_outer):
+            self.means_at(x)
+            for t in self.feet:
+                t.mode = "fixed"
+            self.problem.reset_cache()
+            fun, jac = self.problem.functions()
+            sol = least_squares(fun, x, jac=jac if opts.jacobian == "analytic" else "2-point", bounds=(lb, ub),
+                                method="trf", ftol=paper.INNER_FTOL, max_nfev=paper.INNER_MAX_ITERATIONS)
+            moved = np.abs(sol.x - x).max()
+            x = sol.x
+            history.append(x.tolist())
+            if moved < 1e-14:
+                break
+        self.means_at(x)
+        for t in self.feet:
+            t.mode = "projected"
+        return x, history
+
+    def trim(self, dq: np.ndarray, fraction: float) -> None:
+        """Drop the `fraction` of frames with the largest weighted residual, per segment."""
+        r, _ = self.evaluate(dq, "projected")
+        pos = 0
+        kept = []
+        for seg in self.segments:
+            n = len(seg.frames)
+            feet = r[pos:pos + 6 * n].reshape(n, 6)
+            flat = r[pos + 6 * n:pos + 11 * n].reshape(n, 5)
+            pos += 11 * n
+            score = (feet**2).sum(1) + (flat**2).sum(1)
+            kept.append(seg.subset(np.sort(np.argsort(score)[: n - int(round(fraction * n))])))
+        self.build(kept)
+
+    def solve_trimmed(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list, list]:
+        """Solve, drop the largest residual frames (`opts.trim_fraction`), solve again
+        from there; (offsets, first solve's history, second's)."""
+        dq, hist1 = self.solve(dq0, opts)
+        hist2: list = []
+        if opts.trim_fraction > 0:
+            self.trim(dq, opts.trim_fraction)
+            dq, hist2 = self.solve(dq, opts)
+        return dq, hist1, hist2
