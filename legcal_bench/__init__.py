@@ -2,7 +2,13 @@
 
 Layers, each importing only from those before it (a test checks):
 errors, paper, provenance, files -> geometry -> robots -> sim -> data -> protocol ->
-estimation -> calibrators -> envs -> policies -> evaluation -> benchmark -> reports -> cli.
+estimation -> calibrators -> envs -> policies -> evaluation -> benchmark -> reports -> api -> cli.
+
+The Python API (`legcal_bench.api`) is on this top level, loaded on first use so that
+`import legcal_bench` (and the command's start-up) stays light:
+
+    import legcal_bench as lb
+    result = lb.calibrate("runs/set", robot="a3")
 """
 
 import os
@@ -19,3 +25,18 @@ if platform.machine().lower() in ("x86_64", "amd64"):
 from legcal_bench.provenance import package_version  # noqa: E402
 
 __version__ = package_version()
+
+# The API's names, loaded on first access (PEP 562).
+_API = ("collect", "load", "calibrate", "score", "diagnose", "walk", "walk_eval")
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+
+        return getattr(importlib.import_module("legcal_bench.api"), name)
+    raise AttributeError(f"module 'legcal_bench' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted(list(globals()) + list(_API))

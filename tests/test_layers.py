@@ -27,6 +27,8 @@ LAYERS = [
     ("evaluation", ("legcal_bench.evaluation",)),
     ("benchmark", ("legcal_bench.benchmark",)),
     ("reports", ("legcal_bench.reports",)),
+    # The Python API: the commands' work for scripts (the package's top level loads it lazily).
+    ("api", ("legcal_bench.api",)),
     ("cli", ("legcal_bench.cli",)),
 ]
 
