@@ -353,7 +353,9 @@ def add_commands(sub) -> None:
                     help="read a folder without session.json (every *.npz in it), e.g. your own logs; "
                          "otherwise refused, as a collection that may have stopped half-way")
     k.add_argument("--calibrator", default="interfoot", help="registered calibrator name (default interfoot)")
-    k.add_argument("--setting", default=None, help="interfoot: operating (default), matched, sensor, a3_operating, "
+    k.add_argument("--setting", default=None, help="interfoot: sensor (default: the declared noise's weights, then "
+                                                   "the generalized least squares), matched, operating (the paper's "
+                                                   "weights and priors, biased on perfect data), a3_operating, "
                                                    "a2_operating")
     k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
     k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
