@@ -302,7 +302,9 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     report["start"] = {"calibrator": res.calibrator, "settings": res.settings, "offsets_rad": res.offsets_rad}
     truth = truth_scores(report, Path(a.bags), legmap.joint_names)
     report["heldout_foot_height_mm"] = heldout_scores(report, legmap, Path(a.bags))
-    made_by = (f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}" + (f" --result {a.result}" if a.result else "")
+    made_by = (f"legcal-bench diagnose --robot {a.robot} --bags {a.bags}"
+               + (f" --result {a.result}" if a.result else f" --calibrator {a.calibrator}"
+                  + "".join(f" --option {kv}" for kv in a.option))
                + (f" --walk {a.walk} --walk-trials {a.walk_trials}" if a.walk else ""))
     walks = None
     if a.walk:

@@ -110,11 +110,14 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
          "| | offsets only | after |", "|---|---|---|",
          f"| chi2 / dof (training) | {d['chi2_per_dof']:.4f} (p = {d['p_value']:.2g}) | "
          f"{a['chi2_per_dof']:.4f} (p = {a['p_value']:.2g}) |"]
-    if "heldout" in d:
-        h, ha = d["heldout"], a["heldout"]
-        L.append(f"| chi2 / dof (held-out sessions) | {h['chi2_per_dof']:.4f} | {ha['chi2_per_dof']:.4f} |")
-        L.append(f"| held-out / training (the gap) | {h['ratio_to_training']:.4f} (p = {h['p_value']:.2g}) | "
+    if "cross_validation" in d:  # each training stance at the estimate from the others
+        h, ha = d["cross_validation"], a["cross_validation"]
+        L.append(f"| chi2 / dof (each stance left out) | {h['chi2_per_dof']:.4f} | {ha['chi2_per_dof']:.4f} |")
+        L.append(f"| left out / training (the gap) | {h['ratio_to_training']:.4f} (p = {h['p_value']:.2g}) | "
                  f"{ha['ratio_to_training']:.4f} (p = {ha['p_value']:.2g}) |")
+    start = report.get("start")
+    if start:
+        L.append(f"| fit started from | {start['calibrator']} | |")
     if truth:
         L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {truth['after']:.4f} |")
     hh = report.get("heldout_foot_height_mm")

@@ -80,6 +80,8 @@ def test_calibrate_and_diagnose_hand_over_training_only(spy, session, tmp_path):
     doc = json.loads((tmp_path / "dg" / "diagnosis.json").read_text())
     assert doc["start"]["calibrator"] == "spy"
     assert "cross_validation" in doc["detection"] and "heldout" not in doc["detection"]
+    md = (tmp_path / "dg" / "diagnosis.md").read_text()
+    assert "each stance left out" in md and "| fit started from | spy |" in md and "--calibrator spy" in md
 
 
 def test_bench_and_sweep_hand_over_training_only(spy, tmp_path):
