@@ -9,7 +9,7 @@ import numpy as np
 from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
-from legcal_bench.estimation.problem.fit import declared_noise, frame_residuals, offsets_fit
+from legcal_bench.estimation.problem.fit import frame_residuals, offsets_fit
 from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights
 
 CONTACT_CHECKS = ("flag", "drop", "off")
@@ -26,7 +26,7 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray) -> l
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
     if sig is None or len({s.recording for s in segments}) < 2:
         return None
-    problem = StanceProblem(prep.kin, segments, noise_weights(declared_noise(prep)), None, [], prep.options.bound)
+    problem = StanceProblem(prep.kin, segments, noise_weights(sig), None, [], prep.options.bound)
     dq, _ = problem.solve(dq0, prep.options)
     final: dict[str, StanceContact] = {}
     while True:

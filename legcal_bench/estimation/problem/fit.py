@@ -211,7 +211,7 @@ def frame_residuals(prep: Prepared, fit: ModelFit, segments: list[Segment], extr
 
 def declared_noise(prep: Prepared,
                    needed_by: str = "the generalized least squares, the posterior and the confound report need it"
-                   ) -> dict | None:
+                   ) -> dict:
     """The recordings' declared noise (`noise_sigmas`); raises when they declare none,
     saying what `needed_by` it."""
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
