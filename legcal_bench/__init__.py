@@ -22,11 +22,8 @@ import platform
 if platform.machine().lower() in ("x86_64", "amd64"):
     os.environ.setdefault("OPENBLAS_CORETYPE", "Haswell")
 
-from legcal_bench.provenance import package_version  # noqa: E402
-
-__version__ = package_version()
-
-# The API's names, loaded on first access (PEP 562).
+# The API's names, loaded on first access (PEP 562); `__version__` too, as reading the
+# installed metadata (importlib.metadata) costs the command's start-up tens of ms.
 _API = ("collect", "load", "calibrate", "score", "diagnose", "walk", "walk_eval")
 
 
@@ -35,8 +32,12 @@ def __getattr__(name: str):
         import importlib
 
         return getattr(importlib.import_module("legcal_bench.api"), name)
+    if name == "__version__":
+        from legcal_bench.provenance import package_version
+
+        return package_version()
     raise AttributeError(f"module 'legcal_bench' has no attribute {name!r}")
 
 
 def __dir__():
-    return sorted(list(globals()) + list(_API))
+    return sorted(list(globals()) + list(_API) + ["__version__"])
