@@ -7,8 +7,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 
 def cmd_bench(a: argparse.Namespace) -> int:
     from legcal_bench.benchmark import plan as planning
@@ -66,6 +64,8 @@ def _bench_closed_loop(a: argparse.Namespace, suite) -> int:
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
+    import numpy as np
+
     from legcal_bench.benchmark import plan as planning
     from legcal_bench.benchmark.runner import run
     from legcal_bench.robots import robot_label
@@ -121,6 +121,8 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
         load_protocol(a.protocol)  # a bad file fails here, naming the field
         out["protocol"] = str(Path(a.protocol).resolve())
     if a.native is not None:
+        import numpy as np
+
         from legcal_bench.robots import load_robot
         from legcal_bench.sim.offsets import resolve_offsets
 

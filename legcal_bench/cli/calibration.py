@@ -6,8 +6,6 @@ import argparse
 import json
 from pathlib import Path
 
-import numpy as np
-
 from legcal_bench.cli.robots import robot_args
 from legcal_bench.errors import ConfigError
 
@@ -53,6 +51,8 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 
 
 def format_result(result, names: list[str]) -> str:
+    import numpy as np
+
     c = result.conditioning
     lines = [f"{result.calibrator} on {result.robot}: offsets (deg)"]
     for n in names:
@@ -113,6 +113,8 @@ def cmd_score(a: argparse.Namespace) -> int:
 def cmd_check(a: argparse.Namespace) -> int:
     """Check a session set before (or after) calibrating: what each data check measures,
     per recording, and the warnings it raises."""
+    import numpy as np
+
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.data.recording import load_session
     from legcal_bench.estimation.checks.datacheck import LIMITS, data_warnings, statistics

@@ -6,12 +6,12 @@ import argparse
 import json
 from dataclasses import asdict
 
-import numpy as np
-
 from legcal_bench.cli.robots import robot_args
 
 
 def cmd_collect(a: argparse.Namespace) -> int:
+    import numpy as np
+
     from legcal_bench.protocol.collect import CollectConfig, collect, format_summary
 
     mjcf_file = a.sim_model is not None and a.sim_model.lower().endswith(".xml")
@@ -29,11 +29,17 @@ def cmd_collect(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
+    sub.add_parser("collect", help="simulate static double-support recordings with known offsets",
+                   build=_collect_options)
+
+
+def _collect_options(c: argparse.ArgumentParser) -> None:
+    """On first use of `collect` only: the effect, preset and sensor names live in the
+    simulation modules (numpy, SciPy, Pinocchio)."""
     from legcal_bench.sim.effects import EFFECTS_HELP
     from legcal_bench.sim.offsets import PRESETS_HELP
     from legcal_bench.sim.sensors import SENSOR_PRESETS
 
-    c = sub.add_parser("collect", help="simulate static double-support recordings with known offsets")
     robot_args(c)
     c.add_argument("--sim-model", default=None,
                    help="simulate this instead: an MJCF file (.xml; an edited copy of the robot's, same joint "

@@ -82,6 +82,12 @@ def _case_table(a: argparse.Namespace, module, option: str, known, name: str, ma
     return data
 
 
+def _fill_default(a: argparse.Namespace, option: str, default) -> None:
+    """An option the parser leaves None because its default lives in a heavy report module."""
+    if getattr(a, option) is None:
+        setattr(a, option, list(default))
+
+
 def cmd_effects_table(a: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -89,6 +95,8 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
 
     from legcal_bench.protocol.stances import check_stance_names
 
+    _fill_default(a, "effects", effects_table.EFFECTS)
+    _fill_default(a, "stances", effects_table.DEFAULT_STANCES)
     check_stance_names(a.stances)
     made_by = (f"legcal-bench effects-table --robots {' '.join(a.robots)} --effects {' '.join(a.effects)} "
                f"--seeds {a.seeds}" + ("" if tuple(a.stances) == effects_table.DEFAULT_STANCES
@@ -103,6 +111,7 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
 def cmd_contact_table(a: argparse.Namespace) -> int:
     from legcal_bench.reports import contact_table
 
+    _fill_default(a, "cases", contact_table.CASES)
     cases = " ".join(f"'{c}'" if " " in c else c for c in a.cases)
     made_by = f"legcal-bench contact-table --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
     _case_table(a, contact_table, "cases", contact_table.CASES, "contact_table", made_by)
@@ -118,17 +127,8 @@ def add_commands(sub) -> None:
     rp.add_argument("--quiet", action="store_true")
     rp.set_defaults(func=cmd_reproduce)
 
-    from legcal_bench.reports.bench_speed import BASELINE
-
-    bs = sub.add_parser("bench-speed", help="time calibration and collection, the code at hand against a baseline commit")
-    bs.add_argument("--robot", default="a3")
-    bs.add_argument("--repeats", type=int, default=5, help="calibrations per case and round (default 5)")
-    bs.add_argument("--rounds", type=int, default=2, help="alternating rounds of baseline and current (default 2)")
-    bs.add_argument("--baseline", default=BASELINE,
-                    help=f"commit to compare with (default {BASELINE}, before the calibration core); none: skip")
-    bs.add_argument("--out", default="reports/bench_speed")
-    bs.add_argument("--quiet", action="store_true")
-    bs.set_defaults(func=cmd_bench_speed)
+    sub.add_parser("bench-speed", help="time calibration and collection, the code at hand against a baseline commit",
+                   build=_bench_speed_options)
 
     b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
     b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE])
@@ -146,27 +146,24 @@ def add_commands(sub) -> None:
     rc.add_argument("--quiet", action="store_true")
     rc.set_defaults(func=cmd_robots_check)
 
-    from legcal_bench.reports.contact_table import CASES
-    from legcal_bench.reports.effects_table import EFFECTS
-
-    for name, option, choices, seeds, out, func, text in (
-            ("effects-table", "effects", EFFECTS, 10, "reports/effects", cmd_effects_table,
+    # The cases' and stances' defaults (None here) are filled in by the command from its
+    # report module, which loads the simulation.
+    for name, option, seeds, out, func, text in (
+            ("effects-table", "effects", 10, "reports/effects", cmd_effects_table,
              "model gap: for each library effect at a realistic size, the offsets-only fit and the fit with the "
              "effect added, beside the clean floor"),
-            ("contact-table", "cases", CASES, 5, "reports/contact_check", cmd_contact_table,
+            ("contact-table", "cases", 5, "reports/contact_check", cmd_contact_table,
              "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
              "contact floor (flags against the truth)")):
         t = sub.add_parser(name, help=text)
         t.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
-        t.add_argument(f"--{option}", nargs="+", default=list(choices))
+        t.add_argument(f"--{option}", nargs="+", default=None)
         t.add_argument("--seeds", type=int, default=seeds)
         t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
         t.add_argument("--out", default=out)
         t.add_argument("--quiet", action="store_true")
         if name == "effects-table":
-            from legcal_bench.protocol.stances import STANCES
-
-            t.add_argument("--stances", nargs="+", default=list(STANCES),
+            t.add_argument("--stances", nargs="+", default=None,
                            help="stances to record (default I II III IV; the range stance 'tall' separates the "
                                 "encoder scales from the offsets)")
         t.set_defaults(func=func)
@@ -178,3 +175,17 @@ def add_commands(sub) -> None:
     rg.add_argument("--workers", type=int, default=2)
     rg.add_argument("--quiet", action="store_true")
     rg.set_defaults(func=cmd_regression)
+
+
+def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
+    """On first use of `bench-speed` only: its baseline commit lives in its report module (numpy)."""
+    from legcal_bench.reports.bench_speed import BASELINE
+
+    bs.add_argument("--robot", default="a3")
+    bs.add_argument("--repeats", type=int, default=5, help="calibrations per case and round (default 5)")
+    bs.add_argument("--rounds", type=int, default=2, help="alternating rounds of baseline and current (default 2)")
+    bs.add_argument("--baseline", default=BASELINE,
+                    help=f"commit to compare with (default {BASELINE}, before the calibration core); none: skip")
+    bs.add_argument("--out", default="reports/bench_speed")
+    bs.add_argument("--quiet", action="store_true")
+    bs.set_defaults(func=cmd_bench_speed)

@@ -7,8 +7,6 @@ import json
 from dataclasses import asdict
 from pathlib import Path
 
-import numpy as np
-
 
 def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
     p.add_argument("--robot", default=default,
@@ -18,6 +16,8 @@ def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
 
 
 def cmd_info(a: argparse.Namespace) -> int:
+    import numpy as np
+
     from legcal_bench.protocol.servos import servo_gains
     from legcal_bench.robots import BUILTIN, load_robot
     from legcal_bench.robots.kinematics import LegKinematics

@@ -213,30 +213,9 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    from legcal_bench.evaluation.distill import DistillConfig
-    from legcal_bench.sim.offsets import PRESETS_HELP
-
-    w = sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional "
-                                    "correction: one walk, or paired trials against the nominal walk")
-    robot_args(w)
-    w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
-                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2)")
-    w.add_argument("--teacher", default=None, help="instead of a policy: the model-based teacher from its recipe "
-                                                   "(e.g. policies/teachers/a3.yaml)")
-    w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "
-                                                     "random:<deg> draws one pattern per seed")
-    w.add_argument("--correction", default=None, help="a calibration result JSON: its offsets are applied as the "
-                                                      "robot applies them (q_enc + dq_hat)")
-    w.add_argument("--seconds", type=float, default=20.0)
-    w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk)")
-    w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets")
-    w.add_argument("--sensors", default="realistic", help="sensor preset: zero, realistic, calibrated-imu")
-    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG)")
-    w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames (default 2)")
-    w.add_argument("--out", default=None, help="write the walk (or trials) as JSON")
-    w.add_argument("--json", action="store_true")
-    w.set_defaults(func=cmd_walk)
-
+    sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional "
+                                "correction: one walk, or paired trials against the nominal walk",
+                   build=_walk_options)
     e = sub.add_parser("walk-eval", help="the closed-loop evaluation: per trial a static calibration with the same "
                                          "offsets, then nominal, uncorrected, corrected and oracle walks")
     robot_args(e)
@@ -260,9 +239,41 @@ def add_commands(sub) -> None:
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_walk_eval)
 
-    t = sub.add_parser("train-policy", help="train our walking policy from scratch: the model-based teacher "
-                                            "(ZMP preview gait + IMU balance feedback) distilled into an MLP by "
-                                            "behaviour cloning and DAgger, checkpoint chosen by rollout success")
+    sub.add_parser("train-policy", help="train our walking policy from scratch: the model-based teacher "
+                                        "(ZMP preview gait + IMU balance feedback) distilled into an MLP by "
+                                        "behaviour cloning and DAgger, checkpoint chosen by rollout success",
+                   build=_train_policy_options)
+
+
+def _walk_options(w: argparse.ArgumentParser) -> None:
+    """On first use of `walk` only: the offset presets live in the simulation (numpy, YAML)."""
+    from legcal_bench.sim.offsets import PRESETS_HELP
+
+    robot_args(w)
+    w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
+                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2)")
+    w.add_argument("--teacher", default=None, help="instead of a policy: the model-based teacher from its recipe "
+                                                   "(e.g. policies/teachers/a3.yaml)")
+    w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "
+                                                     "random:<deg> draws one pattern per seed")
+    w.add_argument("--correction", default=None, help="a calibration result JSON: its offsets are applied as the "
+                                                      "robot applies them (q_enc + dq_hat)")
+    w.add_argument("--seconds", type=float, default=20.0)
+    w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk)")
+    w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets")
+    w.add_argument("--sensors", default="realistic", help="sensor preset: zero, realistic, calibrated-imu")
+    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG)")
+    w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames (default 2)")
+    w.add_argument("--out", default=None, help="write the walk (or trials) as JSON")
+    w.add_argument("--json", action="store_true")
+    w.set_defaults(func=cmd_walk)
+
+
+def _train_policy_options(t: argparse.ArgumentParser) -> None:
+    """On first use of `train-policy` only: its defaults live in the training module (the
+    simulation, Pinocchio)."""
+    from legcal_bench.evaluation.distill import DistillConfig
+
     robot_args(t)
     t.add_argument("--teacher", default=None, help="teacher recipe YAML (format legcal-teacher/1; default: "
                                                    "policies/teachers/<robot>.yaml for a built-in robot)")
