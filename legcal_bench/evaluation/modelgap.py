@@ -44,14 +44,16 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
 
-from legcal_bench.estimation.modelgap.effects import joint_loads, load_effects, registry
+from legcal_bench.estimation.modelgap.confounds import confound_report
+from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry
 from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, score
 from legcal_bench.estimation.modelgap.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
 from legcal_bench.data.recording import training
-from legcal_bench.estimation.problem.fit import declared_noise, fit_model, frame_residuals, start_confounds
+from legcal_bench.estimation.problem.fit import (ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
+                                                 whitened_rows)
 from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
 from legcal_bench.robots.legmap import SIDES
 
@@ -213,6 +215,27 @@ def candidates(ctx: Context, names=None) -> tuple[list[str], list[str]]:
     return ok, notes
 
 
+def _confounds_each(ctx: Context, names, dq0: np.ndarray) -> dict:
+    """`start_confounds` of each effect of `names` alone with the offsets (at the
+    offsets-only estimate `dq0`, effects at zero), from one evaluation of every
+    effect's columns: at zero an effect's columns, and the whitening, do not depend on
+    which other effects are in the model, so each report reads its own columns."""
+    out: dict = {"effects": {}, "held": []}
+    if not names:
+        return out
+    prep = ctx.prep
+    model = effect_model(prep.kin, tuple(names), prep.segments)
+    dq0 = np.asarray(dq0, dtype=float)
+    start = ModelFit(tuple(names), model, np.r_[dq0, np.zeros(model.n - 12)], dq0, (), None, prep.segments)
+    _, J, _ = whitened_rows(prep, start)
+    for e in model.effects:
+        one = confound_report(np.concatenate([J[:, :12], J[:, model.slices[e.name]]], axis=1),
+                              EffectModel(prep.kin, [e]), prep.robot.joint_names)
+        out["effects"].update(one["effects"])
+        out["held"] += one["held"]
+    return out
+
+
 def _confound_entries(confounds: dict | None) -> list[dict]:
     out = []
     if not confounds:
@@ -259,9 +282,8 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     if not significant:
         notes.append("selection not run: the offsets-only model explains these data within the declared noise")
     # What these data cannot separate, per candidate, whether or not selection runs.
-    for name in tried:
-        for c in _confound_entries(start_confounds(ctx.prep, (name,), base_fit.x[:12])):
-            confounded.setdefault(c["effect"], c)
+    for c in _confound_entries(_confounds_each(ctx, tried, base_fit.x[:12])):
+        confounded.setdefault(c["effect"], c)
     while significant and len(selected) < MAX_EFFECTS:
         rows = []
         for name in tried:
@@ -269,7 +291,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                 continue
             say(f"fit + {name}")
             fit = fit_model(ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
-            ev = evaluate(ctx, fit, ctx.prep.segments)
+            ev = evaluate(ctx, fit, ctx.prep.segments, keep_frames=True)  # the frames: a kept one is traced
             k = ev.k - current.k
             d = current.chi2 - ev.chi2
             move = np.abs(fit.x[:12] - current_fit.x[:12]) / sigma0
@@ -303,7 +325,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         base_folds = None
         if current.p_value >= ALPHA / 2:
             break
-    final = evaluate(ctx, current_fit, ctx.prep.segments, keep_frames=True)
+    final = current  # evaluated at current_fit over every segment, frames kept
     after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
              "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
     if cv_current is not None:

@@ -108,3 +108,29 @@ def test_a_clean_leg_length_fit_leaves_no_structure_for_the_location_test(tmp_pa
     assert not _structured(tracing), tracing["locations"]
     for loc in tracing["locations"].values():
         assert loc["delta_chi2"] < loc["dof"] + 5 * (2 * loc["dof"]) ** 0.5
+
+
+def test_the_confounds_of_each_candidate_from_one_evaluation_match_each_alone(tmp_path):
+    # `_confounds_each` reads every candidate's report from one evaluation of all their
+    # columns (issue #36): the same numbers as `start_confounds` of each effect alone.
+    import numpy as np
+
+    from legcal_bench.estimation.problem.fit import fit_model, start_confounds
+    from legcal_bench.evaluation.modelgap import _confounds_each, candidates, context
+
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=2, stances=("I", "II", "III"),
+                          stance_s=3.0, standing_s=1.0, heldout=0), tmp_path / "set", progress=False)
+    ctx = context(lm, load_session(tmp_path / "set", robot=lm))
+    dq0 = fit_model(ctx.prep).x[:12]
+    tried, _ = candidates(ctx)
+    each = _confounds_each(ctx, tried, dq0)
+    assert list(each["effects"]) == tried
+    for name in tried:
+        alone = start_confounds(ctx.prep, (name,), dq0)["effects"][name]
+        got = each["effects"][name]
+        assert got["confounded_with_offsets"] == alone["confounded_with_offsets"], name
+        np.testing.assert_allclose(got["cosines_to_offsets"], alone["cosines_to_offsets"], rtol=1e-9, atol=1e-12)
+        for p, v in alone["parameters"].items():
+            np.testing.assert_allclose(got["parameters"][p]["sine_to_all_others"], v["sine_to_all_others"],
+                                       rtol=1e-6, atol=1e-12)
