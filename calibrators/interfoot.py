@@ -140,7 +140,7 @@ class InterFootCalibrator(Calibrator):
         t_contact = time.perf_counter()
         contacts, dropped = None, []
         if self.contact_check != "off":
-            contacts = contact_check(prep, problem.segments, dq)
+            contacts = contact_check(prep, problem.segments, dq, solved=True)
             flagged = [c for c in contacts or [] if c.flagged]
             warnings += [c.text() for c in flagged]
             kept = [s for s in problem.segments if s.recording not in {c.recording for c in flagged}]
@@ -181,9 +181,7 @@ class InterFootCalibrator(Calibrator):
         t_gls = time.perf_counter() - t_gls
 
         t2 = time.perf_counter()
-        problem.means_at(dq)
-        _, J_fixed = problem.evaluate(dq, "fixed")
-        _, J_proj = problem.evaluate(dq, "projected")
+        r_final, J_fixed, J_proj = problem.evaluate_both(dq)
         n_data = problem.n_data_rows
         obs = analyze(J_fixed[:n_data], problem.prior_hessian(), robot.joint_names, robot.joint_roles,
                       J_data_projected=J_proj[:n_data])
@@ -199,13 +197,11 @@ class InterFootCalibrator(Calibrator):
             post = noise_posterior(prep, problem, dq, signs)
         if post is not None:
             warnings += uncertainty_warnings(post)
-        tilt = tilt_response(prep, problem, dq, None if gls is None else
-                             lambda segs, x: refine(prep, replace(gls.fit, x=x, q_ref=x, segments=segs)).fit.x)
+        tilt = tilt_response(prep, problem, dq, gls)
         warnings += imu_tilt_warnings(tilt, stances[0].sensor_model.tilt_bound, signs)
         warnings += bound_warnings(dq, self.options.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)
         t_obs = time.perf_counter() - t2
-        r_final, _ = problem.evaluate(dq, "projected")
         effects_report = None
         if self.effect_names:
             t3 = time.perf_counter()

@@ -38,7 +38,7 @@ from legcal_bench.calibrators.base import CalibrationResult, Calibrator, number_
 from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.checks.datacheck import data_warnings
-from legcal_bench.estimation.imu.levelling import tilted, up_in_base
+from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.problem.preprocess import filter_warnings, select_frames
@@ -138,13 +138,12 @@ class YamaneCalibrator(Calibrator):
                                [SoleHeightTerm(kin, Q, 1.0 / sig["height"]), ImuTiltTerm(up, 1.0 / sig["tilt"])])
             post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
             warnings += uncertainty_warnings(post)
-        tilt_response = np.zeros((12, 2))
-        eps = 1e-3
+        # A fixed tilt of the IMU's vertical moves the IMU rows only: d(up) = e_axis x up, so
+        # the rows move by -w_imu e_axis x up; the offsets follow to first order.
+        dr = np.zeros((n, 11, 2))
         for axis in range(2):
-            moved = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
-                            [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(tilted(up, axis, eps), w_imu)])
-            x = moved.solve(sol.x, method=SOLVERS[self.solver], tol=self.tol, max_nfev=100).x
-            tilt_response[:, axis] = (moved.unpack(x)[OFFSETS] - dq) / eps
+            dr[:, 8:, axis] = -w_imu * np.cross(np.eye(3)[axis], up)
+        tilt_response = problem.shared_response(sol.x, dr.reshape(-1, 2))[:12]
         warnings += imu_tilt_warnings(tilt_response, stances[0].sensor_model.tilt_bound, signs)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)

@@ -15,19 +15,26 @@ from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProb
 CONTACT_CHECKS = ("flag", "drop", "off")
 
 
-def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray) -> list[StanceContact] | None:
+def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
+                  solved: bool = False) -> list[StanceContact] | None:
     """The per-stance coplanarity check of `segments` (a fit's, after trimming), from
     offsets `dq0`: on the noise-weighted problem without priors whatever the fit's
     setting (a prior's pull would show as a departure), stances tested against the
     others; the worst flagged stance is set aside and the rest tested again without it,
     while three or more remain (one bad stance would otherwise spoil the others'
-    predictions). None when the recordings declare no noise to judge it against or have
-    a single stance."""
+    predictions). `solved`: `dq0` is the optimum of `prep`'s weights over `segments`,
+    so where those are the noise weights it is taken as it is, not solved for again.
+    None when the recordings declare no noise to judge it against or have a single
+    stance."""
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
     if sig is None or len({s.recording for s in segments}) < 2:
         return None
-    problem = StanceProblem(prep.kin, segments, noise_weights(sig), None, [], prep.options.bound)
-    dq, _ = problem.solve(dq0, prep.options)
+    weights = noise_weights(sig)
+    problem = StanceProblem(prep.kin, segments, weights, None, [], prep.options.bound)
+    if solved and prep.w == weights:
+        dq = np.asarray(dq0, dtype=float)
+    else:
+        dq, _ = problem.solve(dq0, prep.options)
     final: dict[str, StanceContact] = {}
     while True:
         results = _stance_contacts(prep, problem, dq, sig)
@@ -51,7 +58,7 @@ def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
     total = sum(info.values())
     means = problem.means_at(dq)
-    r, J = problem.evaluate(dq, "projected")
+    r, J = fr.stacked(problem.sf, problem.sg, 12)  # the noise-weighted problem's rows
     owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
     # The offsets' change without each stance: one Gauss-Newton step on the other rows.
     delta = {n: -np.linalg.lstsq(J[owner != n], r[owner != n], rcond=None)[0] for n in names}

@@ -21,8 +21,10 @@ maps a name to an `Effect` subclass (the library: `legcal_bench.estimation.model
 
 from __future__ import annotations
 
+import sys
 from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -76,13 +78,17 @@ class Effect(ABC):
 
 
 def registry() -> dict[str, type[Effect]]:
-    """Effect classes by name: the entry-point group `legcal_bench.effects`."""
+    """Effect classes by name: the entry-point group `legcal_bench.effects`. Read once
+    per import path (`sys.path`): scanning the installed distributions costs ~10 ms, and
+    a fit asks for its effects many times."""
+    return dict(_registry(tuple(sys.path)))
+
+
+@lru_cache(maxsize=8)
+def _registry(path: tuple[str, ...]) -> tuple[tuple[str, type[Effect]], ...]:
     from importlib.metadata import entry_points
 
-    out = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        out[ep.name] = ep.load()
-    return out
+    return tuple((ep.name, ep.load()) for ep in entry_points(group=ENTRY_POINT_GROUP))
 
 
 def load_effects(names) -> list[Effect]:

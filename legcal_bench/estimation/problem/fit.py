@@ -11,7 +11,6 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from legcal_bench.errors import CalibrationError
-from legcal_bench.estimation.imu.levelling import levelling_rotations, tilted
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.uncertainty import posterior
 from legcal_bench.estimation.information.whitening import frame_covariances, whitened_system, whitening
@@ -164,6 +163,19 @@ class FrameResiduals:
     q_enc: np.ndarray
     time_index: np.ndarray
 
+    def stacked(self, sf: np.ndarray, sg: np.ndarray, columns: int) -> tuple[np.ndarray, np.ndarray]:
+        """(r, J) over the first `columns` columns, the rows weighted (`sf` the six
+        inter-foot rows', `sg` the five flat-ground rows') and stacked as a
+        `StanceProblem` over the same segments stacks them: per segment its inter-foot
+        rows, then its flat-ground rows."""
+        r, J = [], []
+        for i in np.unique(self.segment):
+            m = self.segment == i
+            for rows, w in ((slice(0, 6), sf), (slice(6, 11), sg)):
+                r.append((self.r[m, rows] * w).ravel())
+                J.append((self.J[m, rows, :columns] * w[:, None]).reshape(-1, columns))
+        return np.concatenate(r), np.vstack(J)
+
     @property
     def G(self) -> np.ndarray:
         return self.J_fixed[:, :, :12]
@@ -184,9 +196,7 @@ def frame_residuals(prep: Prepared, fit: ModelFit, segments: list[Segment], extr
     x = np.r_[fit.x, np.zeros(model.n - fit.model.n)]
     unit = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6)
     problem = StanceProblem(kin, segments, unit, None, [], prep.options.bound, model, fit.q_ref)
-    problem.means_at(x)
-    _, J_fix = problem.evaluate(x, "fixed")
-    r, J = problem.evaluate(x, "projected")
+    r, J_fix, J = problem.evaluate_both(x)
     rows, Js, Jfs, seg_idx, rec, q, tix = [], [], [], [], [], [], []
     pos = 0
     for i, seg in enumerate(segments):
@@ -225,10 +235,18 @@ def whitened_rows(prep: Prepared, fit: ModelFit) -> tuple[np.ndarray, np.ndarray
     """(z, Jw, rank): the residual rows of the fit's segments at `fit` and their Jacobian
     over every column of `fit.model` (held ones too, segment means eliminated), each
     frame whitened by its declared covariance (`whitening`)."""
+    z, Jw, rank = _whitened(prep, fit)
+    return z, Jw[:, :fit.model.n], rank
+
+
+def _whitened(prep: Prepared, fit: ModelFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`whitened_rows` with the IMU tilt's two columns last (`NOISE_TILT`, segment means
+    eliminated): how the rows move with a fixed error of the IMU's vertical."""
     sig = declared_noise(prep)
     fr = frame_residuals(prep, fit, fit.segments)
     W, rank = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
-    z, Jw = whitened_system(fr.r, fr.J[:, :, :fit.model.n], W)
+    tilt = fr.J[:, :, fr.model.slices[NOISE_TILT]][:, :, :2]
+    z, Jw = whitened_system(fr.r, np.concatenate([fr.J[:, :, :fit.model.n], tilt], axis=2), W)
     return z, Jw, rank
 
 
@@ -260,6 +278,7 @@ class Refined:
     steps: int
     converged: bool
     chi2_per_dof: float
+    tilt: np.ndarray | None = None  # (rows, 2) the whitened rows' change per rad of IMU tilt (x, y)
 
     @property
     def holds(self) -> bool:
@@ -282,7 +301,8 @@ def refine(prep: Prepared, fit: ModelFit) -> Refined:
     x = np.array(fit.x, dtype=float)
     converged = False
     for n_steps in range(1, REFINE_MAX_STEPS + 1):
-        z, Jw, rank = whitened_rows(prep, replace(fit, x=x.copy(), q_ref=x[:12].copy()))
+        z, Jw_all, rank = _whitened(prep, replace(fit, x=x.copy(), q_ref=x[:12].copy()))
+        Jw = Jw_all[:, :fit.model.n]
         A = Jw[:, free]
         step = np.linalg.lstsq(A, z, rcond=None)[0]
         std = np.sqrt(np.diag(np.linalg.pinv(A.T @ A, hermitian=True)))
@@ -294,7 +314,8 @@ def refine(prep: Prepared, fit: ModelFit) -> Refined:
     dof = int(rank.sum()) - 6 * len(fit.segments) - len(free)
     bound = prep.options.bound
     x[:12] = np.clip(x[:12], -bound, bound)
-    return Refined(replace(fit, x=x, q_ref=x[:12].copy()), Jw, n_steps, converged, float(r @ r / max(dof, 1)))
+    return Refined(replace(fit, x=x, q_ref=x[:12].copy()), Jw, n_steps, converged, float(r @ r / max(dof, 1)),
+                   Jw_all[:, fit.model.n:])
 
 
 def noise_posterior(prep: Prepared, problem: StanceProblem, dq: np.ndarray, signs: np.ndarray) -> dict | None:
@@ -311,26 +332,24 @@ def noise_posterior(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sign
     return posterior(J.T @ J, prep.robot.joint_names, prep.robot.joint_roles, signs)
 
 
-def tilt_response(prep: Prepared, problem: StanceProblem, dq: np.ndarray, finish=None,
-                  eps: float = 1e-3) -> np.ndarray:
+def tilt_response(prep: Prepared, problem: StanceProblem, dq: np.ndarray, gls: Refined | None = None) -> np.ndarray:
     """(12, 2) how the estimate moves per rad of a fixed error of the IMU's vertical
-    about the pelvis x and y axes: the same problem re-solved, from `dq`, with every up
-    vector tilted by `eps` (the response is linear at this size); with `finish`
-    (segments, x -> x: the generalized least squares) that instead of the row-weighted
-    solve."""
-    base = problem.segments
-    V = np.zeros((12, 2))
-    for axis in range(2):
-        segs = []
-        for s in base:
-            up = tilted(s.up_B, axis, eps)
-            segs.append(replace(s, up_B=up, R_WB=levelling_rotations(up)))
-        if finish is not None:
-            moved = finish(segs, dq)
-        else:
-            problem.build(segs)
-            moved, _ = problem.solve(dq, prep.options)
-        V[:, axis] = (moved - dq) / eps
-    problem.build(base)
-    problem.means_at(dq)
-    return V
+    about the pelvis x and y axes (every up vector rotated alike): to first order, the
+    Gauss-Newton step of the fit's own problem against the rows' change with the tilt,
+    -(J^T J)^-1 J^T T, T the `imu_tilt` effect's columns at zero (segment means
+    eliminated). With `gls` (the generalized least squares) its whitened rows; else
+    `problem`'s row-weighted ones at `dq`, priors included. The response is linear at the
+    sizes it is used for (a declared tilt bound of a few mrad)."""
+    if gls is not None:
+        held = {gls.fit.model.names.index(h) for h in gls.fit.held}
+        free = [i for i in range(gls.fit.model.n) if i not in held]
+        step = np.linalg.lstsq(gls.Jw[:, free], gls.tilt, rcond=None)[0]
+        return -step[:12]
+    model = effect_model(prep.kin, [NOISE_TILT], problem.segments)
+    with_tilt = StanceProblem(prep.kin, problem.segments, problem.w, problem.prior, problem.knees, problem.bound,
+                              model, np.asarray(dq, dtype=float))
+    x = np.r_[dq, np.zeros(model.n - 12)]
+    with_tilt.means_at(x)
+    _, J = with_tilt.evaluate(x, "projected")
+    tilt = J[:, model.slices[NOISE_TILT]][:, :2]
+    return -np.linalg.lstsq(J[:, :12], tilt, rcond=None)[0]

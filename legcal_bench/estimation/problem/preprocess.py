@@ -113,7 +113,11 @@ def _local_residuals(C: np.ndarray, times: np.ndarray, window_s: float) -> np.nd
         centres = np.append(times[0] + step * np.arange(n_centres), times[-1])
     lo = np.searchsorted(times, centres - window_s / 2, side="left")
     hi = np.searchsorted(times, centres + window_s / 2, side="right")
-    med = np.array([np.median(tau[a:b], axis=0) for a, b in zip(lo, hi)])
+    med = np.empty((len(lo), 6))
+    width = hi - lo
+    for w in np.unique(width):  # windows of one width at once (all but those at the ends)
+        at = np.flatnonzero(width == w)
+        med[at] = np.median(tau[lo[at, None] + np.arange(w)], axis=1)
     if centres is not times:
         med = np.column_stack([np.interp(times, centres, med[:, i]) for i in range(6)])
     local = M @ Exp(med)
@@ -179,6 +183,10 @@ def _cluster(Q: np.ndarray, n_max: int) -> np.ndarray:
     if len(Q) <= n_max:
         return np.arange(len(Q))
     centroids, _ = kmeans2(Q, n_max, seed=0, minit="points")
-    d2 = ((Q[:, None, :] - centroids[None]) ** 2).sum(-1)
-    nearest = np.unique(np.argmin(d2, axis=0))
-    return np.sort(nearest)
+    # Per centroid, the nearest frame (the first on a tie), in blocks of centroids that
+    # keep the (frames, block, 12) differences in cache.
+    nearest = np.empty(len(centroids), dtype=np.intp)
+    for a in range(0, len(centroids), 64):
+        d2 = ((Q[:, None, :] - centroids[None, a:a + 64]) ** 2).sum(-1)
+        nearest[a:a + 64] = np.argmin(d2, axis=0)
+    return np.unique(nearest)

@@ -141,6 +141,15 @@ class Problem:
         return -ub, ub
 
     # ------------------------------------------------------------ evaluation
+    def dense(self, J: dict[str, np.ndarray], rows: int) -> np.ndarray:
+        """A shared-only term's Jacobian blocks (name -> (rows, size)) as rows over every
+        column."""
+        Jd = np.zeros((rows, self.n_params))
+        for name, Jb in J.items():
+            c = self.cols[name]
+            Jd[:, c:c + self.blocks[name].size] = Jb
+        return Jd
+
     def _chunks(self, x: np.ndarray, data_only: bool) -> list[tuple]:
         """Row chunks in order: ("dense", r, J (rows, n_params)) for a shared-only term,
         ("frames", r, Bq (n, per, n_shared), Ba (n, per, frame_width)) for a group of
@@ -154,11 +163,7 @@ class Problem:
             computed = [t.compute(values) for t in group]
             if group[0].n_frames is None:
                 (r, J), = computed
-                Jd = np.zeros((len(r), self.n_params))
-                for name, Jb in J.items():
-                    c = self.cols[name]
-                    Jd[:, c:c + self.blocks[name].size] = Jb
-                out.append(("dense", r, Jd))
+                out.append(("dense", r, self.dense(J, len(r))))
                 continue
             n = group[0].n_frames
             widths = [t.rows_per_frame for t in group]
@@ -233,6 +238,12 @@ class Problem:
     def reset_cache(self) -> None:
         self._cache = None
 
+    def cached_residual(self, x: np.ndarray) -> np.ndarray | None:
+        """The residual at `x` if the last solve evaluated it there (else None)."""
+        if self._cache is not None and np.array_equal(self._cache[0], x):
+            return self._cache[1]
+        return None
+
     def solve(self, x0: np.ndarray, method: str = "lm", tol: float = 1e-10, max_nfev: int = 100,
               jac: str = "analytic", on_jacobian=None, **kwargs):
         """scipy least squares from `x0`. `method="lm"` (MINPACK, unbounded) is re-run
@@ -302,13 +313,14 @@ class Problem:
             frames = xk[self.n_shared:].reshape(self.n_frames, self.frame_width)
             for _ in range(inner_max):
                 r_d, J_d, r_f, Bq, Ba = self._frame_blocks(xk)
-                step = -np.linalg.solve(np.einsum("npi,npj->nij", Ba, Ba),
-                                        np.einsum("npi,np->ni", Ba, r_f)[..., None])[..., 0]
+                BaT = Ba.transpose(0, 2, 1)
+                step = -np.linalg.solve(BaT @ Ba, BaT @ r_f[..., None])[..., 0]
                 frames += step
                 if np.abs(step).max() < inner_tol:
                     break
             r_d, J_d, r_f, Bq, Ba = self._frame_blocks(xk)
-            G = np.linalg.solve(np.einsum("npi,npj->nij", Ba, Ba), np.einsum("npi,npj->nij", Ba, Bq))
+            BaT = Ba.transpose(0, 2, 1)
+            G = np.linalg.solve(BaT @ Ba, BaT @ Bq)
             J_f = Bq - Ba @ G  # (n, p, n_shared): the per-frame blocks projected out
             r = np.concatenate([r_d, r_f.ravel()])
             J = np.vstack([J_d, J_f.reshape(-1, self.n_shared)])
@@ -332,7 +344,36 @@ class Problem:
     def information(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(H_data, H_reg) on the shared blocks at `x`: J^T J of the data terms, and of
         all terms; per-frame blocks are eliminated frame by frame (Schur complement)."""
-        return self._shared_information(x, True), self._shared_information(x, False)
+        H_data = self._shared_information(x, True)
+        if all(t.data for t in self.terms):  # no priors: the two are one
+            return H_data, H_data.copy()
+        return H_data, self._shared_information(x, False)
+
+    def shared_response(self, x: np.ndarray, dr: np.ndarray) -> np.ndarray:
+        """(n_shared, k) how the optimum's shared blocks move, to first order, when the
+        residual rows move by `dr` (rows, k) at the optimum `x`: the Gauss-Newton step
+        -H^-1 g with the per-frame blocks re-optimised (eliminated frame by frame, as in
+        `information`)."""
+        k = dr.shape[1]
+        H = np.zeros((self.n_shared, self.n_shared))
+        g = np.zeros((self.n_shared, k))
+        row0 = 0
+        for c in self._chunks(x, data_only=False):
+            if c[0] == "dense":
+                Jq = c[2][:, :self.n_shared]
+                H += Jq.T @ Jq
+                g += Jq.T @ dr[row0:row0 + len(Jq)]
+                row0 += len(Jq)
+                continue
+            _, _, Bq, Ba, _ = c
+            n, per = Bq.shape[:2]
+            d = dr[row0:row0 + n * per].reshape(n, per, k)
+            row0 += n * per
+            BqT, BaT = Bq.transpose(0, 2, 1), Ba.transpose(0, 2, 1)
+            Hqa_Haa_inv = (BqT @ Ba) @ np.linalg.inv(BaT @ Ba)  # (n, q, a)
+            H += _flat(Bq).T @ _flat(Bq) - _flat(Hqa_Haa_inv, 1).T @ _flat(BaT @ Bq)
+            g += _flat(Bq).T @ _flat(d) - _flat(Hqa_Haa_inv, 1).T @ _flat(BaT @ d)
+        return -np.linalg.solve(H, g)
 
     def _shared_information(self, x: np.ndarray, data_only: bool) -> np.ndarray:
         H = np.zeros((self.n_shared, self.n_shared))
@@ -342,8 +383,16 @@ class Problem:
                 H += Jq.T @ Jq
                 continue
             _, _, Bq, Ba, _ = c
-            Hqq = np.einsum("nri,nrj->ij", Bq, Bq)
-            Hqa = np.einsum("nri,nrj->nij", Bq, Ba)
-            Haa = np.einsum("nri,nrj->nij", Ba, Ba)
-            H += Hqq - np.einsum("nij,njk,nlk->il", Hqa, np.linalg.inv(Haa), Hqa)
+            BqT, BaT = Bq.transpose(0, 2, 1), Ba.transpose(0, 2, 1)
+            Hqa_Haa_inv = (BqT @ Ba) @ np.linalg.inv(BaT @ Ba)  # (n, q, a)
+            H += _flat(Bq).T @ _flat(Bq) - _flat(Hqa_Haa_inv, 1).T @ _flat(BaT @ Bq)
         return H
+
+
+def _flat(A: np.ndarray, axis: int = 2) -> np.ndarray:
+    """Per-frame blocks (n, r, c) stacked for one product over frames: sum_n A_n^T B_n =
+    _flat(A).T @ _flat(B) with the rows stacked (axis 2, the default); axis 1 stacks the
+    columns' transpose, sum_n A_n B_n = _flat(A, 1).T @ _flat(B)."""
+    if axis == 2:
+        return A.reshape(-1, A.shape[2])
+    return A.transpose(0, 2, 1).reshape(-1, A.shape[1])

@@ -269,6 +269,23 @@ class StanceProblem:
             t.mode = mode
         return self.problem.evaluate(dq)
 
+    def evaluate_both(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(r, J_fixed, J_projected) at `x`, the segment means re-estimated at `x`: the
+        two `evaluate` modes from one pass of the kinematics (the projected feet columns
+        from the fixed ones, `project_mean`)."""
+        self.means_at(x)
+        for t in self.feet:
+            t.mode = "both"
+        r, J_fixed = self.problem.evaluate(x)
+        J_proj = J_fixed.copy()
+        pos = 0
+        for seg, t in zip(self.segments, self.feet):
+            rows = 6 * len(seg.frames)
+            J_proj[pos:pos + rows] = self.problem.dense(t.projected, rows)
+            t.projected, t.mode = None, "projected"
+            pos += 11 * len(seg.frames)
+        return r, J_fixed, J_proj
+
     def solve(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list]:
         lb, ub = -opts.bound * np.ones(12), opts.bound * np.ones(12)
         x0 = np.array(dq0, dtype=float)
@@ -306,7 +323,9 @@ class StanceProblem:
 
     def trim(self, dq: np.ndarray, fraction: float) -> None:
         """Drop the `fraction` of frames with the largest weighted residual, per segment."""
-        r, _ = self.evaluate(dq, "projected")
+        r = self.problem.cached_residual(dq) if all(t.mode == "projected" for t in self.feet) else None
+        if r is None:
+            r, _ = self.evaluate(dq, "projected")
         pos = 0
         kept = []
         for seg in self.segments:

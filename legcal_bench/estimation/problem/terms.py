@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.estimation.problem.problem import Term
-from legcal_bench.estimation.problem.residuals import feet_residuals, flat_residuals, flat_residuals_extended
+from legcal_bench.estimation.problem.residuals import (feet_residuals, flat_residuals, flat_residuals_extended,
+                                                       project_mean)
 from legcal_bench.geometry.lie import frechet_mean
 from legcal_bench.robots.kinematics import FrameKinematics, LegKinematics, frame_kinematics
 
@@ -57,12 +58,15 @@ class InterFootTerm(Term):
 
     mode "projected": the mean is re-estimated with the offsets (variable projection;
     the Jacobian includes dM/d dq); "fixed": the mean is held (`update_mean` sets it),
-    as in the paper's alternation."""
+    as in the paper's alternation; "both": the fixed mode's rows and Jacobian, and the
+    projected Jacobian at the same mean kept in `projected` (one kinematics pass for
+    both)."""
 
     def __init__(self, name: str, seg: SegmentKinematics, weights: np.ndarray, mode: str = "projected"):
         self.name, self.seg, self.w, self.mode = name, seg, np.asarray(weights, dtype=float), mode
         self.blocks = seg.blocks
         self.mean: np.ndarray | None = None
+        self.projected: dict[str, np.ndarray] | None = None
 
     def update_mean(self, x) -> np.ndarray:
         """The segment's Fréchet mean at `x` (block values, or the offsets alone)."""
@@ -74,8 +78,13 @@ class InterFootTerm(Term):
         fk = self.seg.state(x)
         if self.mode == "projected":
             self.update_mean(x)
-        r, J = feet_residuals(fk.C, fk.G, self.mean, self.mode)
-        return (self.w * r).ravel(), self.seg.split((self.w[:, None] * J).reshape(-1, J.shape[-1]))
+        r, J = feet_residuals(fk.C, fk.G, self.mean, "projected" if self.mode == "projected" else "fixed")
+        if self.mode == "both":
+            self.projected = self._weighted(project_mean(J, r))
+        return (self.w * r).ravel(), self._weighted(J)
+
+    def _weighted(self, J: np.ndarray) -> dict[str, np.ndarray]:
+        return self.seg.split((self.w[:, None] * J).reshape(-1, J.shape[-1]))
 
 
 class FlatGroundTerm(Term):
@@ -146,19 +155,15 @@ class KneePriorTerm(Term):
         return self.weight * (x[OFFSETS][self.knees] - self.prior), {OFFSETS: J}
 
 
-def _tilt_rotations(roll: np.ndarray, pitch: np.ndarray):
-    """R = R_y(pitch) R_x(roll) and its two partial derivatives, batched (N, 3, 3)."""
+def _tilt_up(roll: np.ndarray, pitch: np.ndarray):
+    """The third row of R = R_y(pitch) R_x(roll), R^T e_z (the model's up vector in the
+    tilted frame), and its partial derivatives by roll and pitch, batched (N, 3) each:
+    the only rows of R the sole and IMU terms use, in closed form."""
     cr, sr, cp, sp = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch)
-    n = len(roll)
-    Rx, dRx = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-    Ry, dRy = np.zeros((n, 3, 3)), np.zeros((n, 3, 3))
-    Rx[:, 0, 0] = 1
-    Rx[:, 1, 1], Rx[:, 1, 2], Rx[:, 2, 1], Rx[:, 2, 2] = cr, -sr, sr, cr
-    dRx[:, 1, 1], dRx[:, 1, 2], dRx[:, 2, 1], dRx[:, 2, 2] = -sr, -cr, cr, -sr
-    Ry[:, 1, 1] = 1
-    Ry[:, 0, 0], Ry[:, 0, 2], Ry[:, 2, 0], Ry[:, 2, 2] = cp, sp, -sp, cp
-    dRy[:, 0, 0], dRy[:, 0, 2], dRy[:, 2, 0], dRy[:, 2, 2] = -sp, cp, -cp, -sp
-    return Ry @ Rx, Ry @ dRx, dRy @ Rx
+    up = np.stack([-sp, cp * sr, cp * cr], axis=1)
+    d_roll = np.stack([np.zeros_like(cr), cp * cr, -cp * sr], axis=1)
+    d_pitch = np.stack([-cp, -sp * sr, -sp * cr], axis=1)
+    return up, d_roll, d_pitch
 
 
 class SoleHeightTerm(Term):
@@ -176,15 +181,14 @@ class SoleHeightTerm(Term):
     def compute(self, x):
         n = self.n_frames
         ang = x[TILT]
-        R, dR_roll, dR_pitch = _tilt_rotations(ang[:, 0], ang[:, 1])
+        g, dg_roll, dg_pitch = _tilt_up(ang[:, 0], ang[:, 1])
         fk = self.seg.at(x[OFFSETS])
         # Corner positions in the pelvis frame, P = R c + p, per foot (n, 4, 3).
         P = np.concatenate([self.c[0] @ np.swapaxes(fk.R_L, 1, 2) + fk.p_L[:, None],
                             self.c[1] @ np.swapaxes(fk.R_R, 1, 2) + fk.p_R[:, None]], axis=1)
         # Corner velocity: R (J_v - [c]x J_w); only its vertical component in the tilted
         # frame matters: g = R_k^T e_z (the third row of R_k), so dz = (g^T R_foot) (J_v - [c]x J_w).
-        g = R[:, 2, :]
-        z = np.einsum("nvj,nj->nv", P, g)
+        z = (P @ g[:, :, None])[..., 0]
         r = self.weight * (z - z.mean(axis=1, keepdims=True))
         Jz = np.zeros((n, 8, 12))
         for side, (Rf, Jf) in enumerate(((fk.R_L, fk.J_L), (fk.R_R, fk.J_R))):
@@ -195,8 +199,8 @@ class SoleHeightTerm(Term):
             Jz[:, 4 * side:4 * side + 4, 6 * side:6 * side + 6] = aJv - axc @ Jf[:, 3:]
         J_dq = self.weight * (Jz - Jz.mean(axis=1, keepdims=True))
         J_tilt = np.zeros((n, 8, 2))
-        for j, dR in enumerate((dR_roll, dR_pitch)):
-            dz = np.einsum("nvj,nj->nv", P, dR[:, 2, :])
+        for j, dg in enumerate((dg_roll, dg_pitch)):
+            dz = (P @ dg[:, :, None])[..., 0]
             J_tilt[:, :, j] = self.weight * (dz - dz.mean(axis=1, keepdims=True))
         return r.ravel(), {OFFSETS: J_dq, TILT: J_tilt}
 
@@ -213,7 +217,7 @@ class ImuTiltTerm(Term):
 
     def compute(self, x):
         ang = x[TILT]
-        R, dR_roll, dR_pitch = _tilt_rotations(ang[:, 0], ang[:, 1])
-        r = self.weight * (R[:, 2, :] - self.up_B)  # R^T e_z, as rows
-        J = np.stack([self.weight * dR[:, 2, :] for dR in (dR_roll, dR_pitch)], axis=2)  # (n, 3, 2)
+        g, dg_roll, dg_pitch = _tilt_up(ang[:, 0], ang[:, 1])
+        r = self.weight * (g - self.up_B)  # R^T e_z, as rows
+        J = np.stack([self.weight * dg_roll, self.weight * dg_pitch], axis=2)  # (n, 3, 2)
         return r.ravel(), {TILT: J}
