@@ -20,7 +20,7 @@ def cmd_bench_speed(a: argparse.Namespace) -> int:
     from legcal_bench.reports.bench_speed import run_bench_speed
 
     print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, rounds=a.rounds, baseline=a.baseline,
-                          progress=not a.quiet))
+                          groups=a.groups, progress=not a.quiet))
     return 0
 
 
@@ -127,8 +127,9 @@ def add_commands(sub) -> None:
     rp.add_argument("--quiet", action="store_true")
     rp.set_defaults(func=cmd_reproduce)
 
-    sub.add_parser("bench-speed", help="time calibration and collection, the code at hand against a baseline commit",
-                   build=_bench_speed_options)
+    _bench_speed_options(sub.add_parser(
+        "bench-speed", help="time where users wait (calibration, collection, start-up, the closed loop, the model-gap "
+                            "suite, the tests), the code at hand against a baseline commit in one run"))
 
     b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
     b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE])
@@ -178,14 +179,20 @@ def add_commands(sub) -> None:
 
 
 def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
-    """On first use of `bench-speed` only: its baseline commit lives in its report module (numpy)."""
-    from legcal_bench.reports.bench_speed import BASELINE
+    from legcal_bench.reports.bench_speed import BASELINE, DEFAULT_GROUPS, GROUPS
 
-    bs.add_argument("--robot", default="a3")
-    bs.add_argument("--repeats", type=int, default=5, help="calibrations per case and round (default 5)")
-    bs.add_argument("--rounds", type=int, default=2, help="alternating rounds of baseline and current (default 2)")
+    bs.add_argument("--groups", nargs="+", default=list(DEFAULT_GROUPS), choices=list(GROUPS), metavar="GROUP",
+                    help=f"what to time: {', '.join(GROUPS)} (default: {' '.join(DEFAULT_GROUPS)}; closed_loop, "
+                         "modelgap and tests take minutes to tens of minutes a round)")
+    bs.add_argument("--robot", default="a3", help="the robot of the calibration and collection groups (default a3)")
+    bs.add_argument("--repeats", type=int, default=None,
+                    help="repeats per probe and round (default: calibration and startup 5, the others 1)")
+    bs.add_argument("--rounds", type=int, default=2,
+                    help="rounds, each running the baseline and the code at hand, alternating which goes first "
+                         "(default 2)")
     bs.add_argument("--baseline", default=BASELINE,
-                    help=f"commit to compare with (default {BASELINE}, before the calibration core); none: skip")
-    bs.add_argument("--out", default="reports/bench_speed")
-    bs.add_argument("--quiet", action="store_true")
+                    help=f"commit to compare with (default {BASELINE}, the commit issue #36 measured); none: only "
+                         "the code at hand")
+    bs.add_argument("--out", default="reports/bench_speed", help="report directory (report.md, report.json)")
+    bs.add_argument("--quiet", action="store_true", help="no progress lines")
     bs.set_defaults(func=cmd_bench_speed)

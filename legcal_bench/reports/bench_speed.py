@@ -1,13 +1,30 @@
-"""`legcal-bench bench-speed`: the hot paths timed, new code against an older commit.
+"""`legcal-bench bench-speed`: where users wait, timed, the code at hand against an
+older commit in one run.
 
-One A3-like weld session set (realistic sensors, four stances) is collected; then the
-speed probe (`speed_probe.py`) runs on the code at hand and on the baseline commit
-(default: the last commit before the calibration core was rebuilt), that commit
-installed into a temporary folder beside it (`git archive` + `pip install --no-deps
---target`), each in its own process on the same recordings, alternating
-`--rounds` times. Reported: medians, the ratio old/new, the targets, and the largest
-difference between the two versions' offsets (the same answer, faster). Writes
-`report.md` and `report.json`.
+The baseline commit (default `BASELINE`, the last commit before issue #36) is installed
+into a temporary folder beside the code at hand (`git archive` + `pip install --no-deps
+--target`); each group's probe script, always the one of the code at hand and using only
+interfaces both versions have, runs in its own process once per version with the
+version on PYTHONPATH, the two alternating (old first, then new first) for `rounds`
+rounds, on the same inputs:
+
+  calibration  `speed_probe.py --only calibration`: calibrators in-process on one A3-like
+               weld session set (realistic sensors, 4 stances; collected once, by the code
+               at hand, in the format both read), `timing_s` and each of its stages;
+  collection   `speed_probe.py --only collection`: the default session set collected
+               (kinematic and weld floors), frames per second;
+  startup      `startup_probe.py`: `--help`, `calibrate --help` and an argument error in
+               fresh interpreters (wall);
+  closed_loop  `closed_loop_probe.py`: the 35-trial closed-loop evaluation (wall);
+  modelgap     `modelgap_probe.py`: `bench --suite modelgap --cases clean library --seeds
+               2`, seconds per session set;
+  tests        `tests_probe.py`: the test command (`python -m pytest` with each version's
+               own tests and settings) in its source tree, wall, counts and the slowest 20.
+
+Reported: per case the medians, the ratio old/new (speed-up; for rates new/old), the
+target and whether it is met; per calibration stage the same; for the calibrators the
+largest difference between the two versions' offsets (the same answer, faster). Writes
+`report.md` and `report.json`, and prints the markdown.
 """
 
 from __future__ import annotations
@@ -21,45 +38,71 @@ import sys
 import tempfile
 from pathlib import Path
 
-import numpy as np
-
 from legcal_bench.errors import ConfigError
 from legcal_bench.files.reports import write_report
 from legcal_bench.provenance import code_version, describe
 
-BASELINE = "a27a25a"  # the last commit before the calibration core (terms, batched kinematics)
-PROBE = Path(__file__).with_name("speed_probe.py")
-# case -> (label, target text, check(new median, old median))
-TARGETS = {
-    "interfoot_solve": ("inter-foot solve, 4 x 450 frames (default solver)", "<= 0.08 s and >= 2x faster",
-                        lambda new, old: new <= 0.08 and old / new >= 2.0),
-    "interfoot_end_to_end": ("inter-foot calibrate end to end (500 -> trim -> 450)", "<= 0.25 s",
-                             lambda new, old: new <= 0.25),
-    "interfoot_end_to_end_operating": ("inter-foot calibrate end to end, setting operating", "–", None),
-    "interfoot_end_to_end_sensor": ("inter-foot calibrate end to end, setting sensor", "–", None),
-    "interfoot_solve_2point": ("inter-foot solve, forward-difference Jacobian", "–", None),
-    "interfoot_solve_alternating": ("inter-foot solve, the paper's alternation", "–", None),
-    "yamane_solve_default": ("Yamane solve, 4 x 450 frames, default weights", "<= 0.25 s", lambda new, old: new <= 0.25),
-    "yamane_solve_sensor": ("Yamane solve, 4 x 450 frames, sensor weights", "<= 0.25 s", lambda new, old: new <= 0.25),
-    "collect_kinematic_frames_per_s": ("kinematic collection (frames/s)", ">= 5000", lambda new, old: new >= 5000),
-    "collect_kinematic_x_real_time": ("kinematic collection (x real time)", "–", None),
-    "collect_weld_frames_per_s": ("weld collection (frames/s)", "–", None),
-    "collect_weld_x_real_time": ("weld collection (x real time)", ">= 50", lambda new, old: new >= 50),
+BASELINE = "4bd338d"  # the commit issue #36 measured (the last before #35; #35 left these paths as fast as it found them)
+HERE = Path(__file__).parent
+GROUPS = {  # group -> (probe script, its extra arguments beyond --repeats, default repeats per round)
+    "calibration": ("speed_probe.py", ["--only", "calibration"], 5),
+    "collection": ("speed_probe.py", ["--only", "collection"], 1),
+    "startup": ("startup_probe.py", [], 5),
+    "closed_loop": ("closed_loop_probe.py", [], 1),
+    "modelgap": ("modelgap_probe.py", [], 1),
+    "tests": ("tests_probe.py", [], 1),
 }
+DEFAULT_GROUPS = ("calibration", "collection", "startup")  # the quick ones (a few minutes); the rest take long
+ENVIRONMENT = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "egl"}
+
+
+def _at_most(limit: float):
+    return f"<= {limit:g}", lambda new: new <= limit
+
+
+def _at_least(limit: float):
+    return f">= {limit:g}", lambda new: new >= limit
+
+
+# case -> (label, (target text, check(new median)) or None)
+TARGETS = {
+    "interfoot_end_to_end_sensor": ("inter-foot calibrate end to end, setting sensor (the default), s", _at_most(0.15)),
+    "interfoot_end_to_end": ("inter-foot calibrate end to end, the default setting (operating before #35), s", None),
+    "interfoot_end_to_end_operating": ("inter-foot calibrate end to end, setting operating, s", None),
+    "interfoot_solve": ("inter-foot solve, 4 x 450 frames, s", None),
+    "interfoot_solve_2point": ("inter-foot solve, forward-difference Jacobian, s", None),
+    "interfoot_solve_alternating": ("inter-foot solve, the paper's alternation, s", None),
+    "yamane_end_to_end": ("Yamane calibrate end to end, default weights, s", _at_most(0.25)),
+    "yamane_end_to_end_sensor": ("Yamane calibrate end to end, sensor weights, s", _at_most(0.25)),
+    "yamane_solve_default": ("Yamane solve, 4 x 450 frames, default weights, s", None),
+    "yamane_solve_sensor": ("Yamane solve, 4 x 450 frames, sensor weights, s", None),
+    "collect_kinematic_frames_per_s": ("kinematic collection, frames/s", _at_least(5000)),
+    "collect_kinematic_x_real_time": ("kinematic collection, x real time", None),
+    "collect_weld_frames_per_s": ("weld collection, frames/s", None),
+    "collect_weld_x_real_time": ("weld collection, x real time", None),
+    "help": ("`legcal-bench --help`, s", _at_most(0.5)),
+    "calibrate_help": ("`legcal-bench calibrate --help`, s", _at_most(0.5)),
+    "calibrate_bad_flag": ("`legcal-bench calibrate --no-such-flag` (argument error), s", _at_most(0.5)),
+    "closed_loop_35": ("35-trial closed loop, A3-like, s", _at_most(45.0)),
+    "modelgap_per_set": ("model-gap suite, s per session set", _at_most(4.0)),
+    "modelgap_total": ("model-gap suite `--cases clean library --seeds 2`, s", None),
+    "test_suite": ("test command (`python -m pytest`), s", _at_most(300.0)),
+}
+RATES = ("frames_per_s", "x_real_time")  # cases where more is faster
 
 
 def _repo_root() -> Path:
-    out = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=Path(__file__).parent, capture_output=True,
-                         text=True, check=False)
+    out = subprocess.run(["git", "rev-parse", "--show-toplevel"], cwd=HERE, capture_output=True, text=True,
+                         check=False)
     if out.returncode != 0:
         raise ConfigError("bench-speed --baseline: needs a git checkout of legcal-bench (give --baseline none to "
                           "time only the code at hand)")
     return Path(out.stdout.strip())
 
 
-def install_baseline(rev: str, work: Path) -> Path:
-    """Install commit `rev` (code only, no dependencies) into `work`; returns the folder
-    to put on PYTHONPATH."""
+def install_baseline(rev: str, work: Path) -> tuple[Path, Path]:
+    """Install commit `rev` (code only, no dependencies) into `work`; returns (the folder
+    to put on PYTHONPATH, its source tree)."""
     root = _repo_root()
     src, site = work / "src", work / "site"
     src.mkdir(parents=True)
@@ -70,64 +113,128 @@ def install_baseline(rev: str, work: Path) -> Path:
     subprocess.run(["tar", "-x", "-C", str(src)], input=archive.stdout, check=True)
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-deps",
                     "--no-build-isolation", "--target", str(site), str(src)], check=True, capture_output=True)
-    return site
+    return site, src
 
 
-def run_probe(data: str, robot: str, repeats: int, pythonpath: Path | None) -> dict:
+def run_probe(group: str, repeats: int, pythonpath: Path | None, data: str, robot: str, src: Path) -> dict:
+    """One run of `group`'s probe on one version (`pythonpath`: the baseline's install;
+    None: the code at hand)."""
+    script, extra, _ = GROUPS[group]
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env.update(ENVIRONMENT)
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
-    out = subprocess.run([sys.executable, str(PROBE), "--data", data, "--robot", robot, "--repeats", str(repeats)],
-                         env=env, capture_output=True, text=True, check=False)
+    args = [sys.executable, str(HERE / script), "--repeats", str(repeats), *extra]
+    if script == "speed_probe.py":
+        args += ["--data", data, "--robot", robot]
+    if script == "tests_probe.py":
+        args += ["--src", str(src)]
+    out = subprocess.run(args, env=env, capture_output=True, text=True, check=False)
     if out.returncode != 0:
-        raise RuntimeError(f"speed probe failed ({'baseline' if pythonpath else 'current'} code):\n{out.stderr}")
+        raise RuntimeError(f"{script} failed ({'baseline' if pythonpath else 'current'} code):\n{out.stderr[-4000:]}")
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int = 5, rounds: int = 2, baseline: str = BASELINE,
-                    progress: bool = True) -> str:
+def _median(runs: list[dict], case: str, stage: str | None = None) -> float | None:
+    values = [v for r in runs for v in (r["cases"][case]["values"] if stage is None else
+                                        r["cases"][case].get("stages", {}).get(stage, []))
+              if case in r["cases"]]
+    return statistics.median(values) if values else None
+
+
+def _ratio(case: str, new: float | None, old: float | None) -> float | None:
+    if new is None or old is None or new <= 0 or old <= 0:
+        return None
+    return new / old if case.endswith(RATES) else old / new
+
+
+def summarize(runs: dict[str, dict[str, list[dict]]]) -> tuple[list[dict], list[dict]]:
+    """(a row per case, a row per calibration stage) from every group's runs."""
+    import numpy as np
+
+    rows, stages = [], []
+    for group, by_side in runs.items():
+        names = list(dict.fromkeys(c for r in by_side["new"] for c in r["cases"]))
+        for case in names:
+            new, old = _median(by_side["new"], case), _median(by_side["old"], case)
+            label, target = TARGETS.get(case, (case, None))
+            row = {"group": group, "case": case, "label": label, "new": new, "old": old,
+                   "speedup": _ratio(case, new, old), "target": None if target is None else target[0],
+                   "met": None if target is None or new is None else bool(target[1](new))}
+            first = {side: next((r["cases"][case] for r in rs if case in r["cases"]), None)
+                     for side, rs in by_side.items()}
+            if first["new"] and first["old"] and "offsets" in first["new"] and "offsets" in first["old"]:
+                row["max_offset_difference_deg"] = float(np.rad2deg(np.max(np.abs(
+                    np.subtract(first["new"]["offsets"], first["old"]["offsets"])))))
+            rows.append(row)
+            for stage in (first["new"] or {}).get("stages", {}):
+                s_new, s_old = _median(by_side["new"], case, stage), _median(by_side["old"], case, stage)
+                stages.append({"case": case, "stage": stage, "new": s_new, "old": s_old,
+                               "speedup": _ratio(case, s_new, s_old)})
+    return rows, stages
+
+
+def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = None, rounds: int = 2,
+                    baseline: str = BASELINE, groups=DEFAULT_GROUPS, progress: bool = True) -> str:
     from legcal_bench.protocol.collect import CollectConfig, collect
 
+    unknown = [g for g in groups if g not in GROUPS]
+    if unknown:
+        raise ConfigError(f"bench-speed --groups {' '.join(unknown)}: unknown; use any of {', '.join(GROUPS)}")
+    root = Path(__file__).resolve().parents[2]
+    runs: dict[str, dict[str, list[dict]]] = {g: {"new": [], "old": []} for g in groups}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        collect(CollectConfig(robot=robot, mode="weld", sensors="realistic"), tmp / "data", progress=progress)
-        site = None if baseline == "none" else install_baseline(baseline, tmp / "baseline")
-        runs: dict[str, list[dict]] = {"new": [], "old": []}
-        for _ in range(rounds):
-            if site is not None:
-                runs["old"].append(run_probe(str(tmp / "data"), robot, repeats, site))
-            runs["new"].append(run_probe(str(tmp / "data"), robot, repeats, None))
-    rows = []
-    for case, (label, target, check) in TARGETS.items():
-        med = {side: statistics.median(v for r in rs for v in r["cases"][case]["values"]) if rs else None
-               for side, rs in runs.items()}
-        row = {"case": case, "label": label, "new": med["new"], "old": med["old"], "target": target}
-        if med["old"] is not None:
-            faster = med["old"] / med["new"] if runs["new"][0]["cases"][case]["unit"] == "s" else med["new"] / med["old"]
-            row["speedup"] = faster
-            if "offsets" in runs["new"][0]["cases"][case]:
-                row["max_offset_difference_deg"] = float(np.rad2deg(np.max(np.abs(
-                    np.subtract(runs["new"][0]["cases"][case]["offsets"], runs["old"][0]["cases"][case]["offsets"])))))
-        row["met"] = None if check is None else bool(check(med["new"], med["old"] if med["old"] is not None else np.inf))
-        rows.append(row)
-    cmd = f"legcal-bench bench-speed --robot {robot} --repeats {repeats} --rounds {rounds} --baseline {baseline}"
+        data = tmp / "data"
+        if "calibration" in groups:
+            collect(CollectConfig(robot=robot, mode="weld", sensors="realistic"), data, progress=False)
+        site, src = (None, None) if baseline == "none" else install_baseline(baseline, tmp / "baseline")
+        for k in range(rounds):
+            for group in groups:
+                n = repeats or GROUPS[group][2]
+                sides = [("old", site, src), ("new", None, root)]
+                for side, path, tree in (sides if k % 2 == 0 else sides[::-1]):
+                    if side == "old" and path is None:
+                        continue
+                    if progress:
+                        print(f"bench-speed: round {k + 1}/{rounds}, {group}, {side} code", file=sys.stderr, flush=True)
+                    runs[group][side].append(run_probe(group, n, path, str(data), robot, tree))
+    rows, stages = summarize(runs)
+    cmd = (f"legcal-bench bench-speed --groups {' '.join(groups)} --robot {robot} --rounds {rounds} "
+           f"--baseline {baseline}" + (f" --repeats {repeats}" if repeats else ""))
     version = code_version()
     L = ["# Speed: the code at hand against the baseline commit", "",
-         f"Generated by `{cmd}` on {platform.machine()}, Python {platform.python_version()}, one BLAS thread per "
-         f"process; {describe(version)}; baseline `{baseline}`. Medians over {rounds} alternating rounds x {repeats} "
-         "repeats (calibration) or x 1 (collection: the default session set, 4150 frames, settle included).", "",
+         f"Generated by `{cmd}` on {platform.machine()} ({os.cpu_count()} cores), Python {platform.python_version()}, "
+         f"one BLAS thread per process; {describe(version)}; baseline `{baseline}`. Medians over {rounds} rounds, "
+         "the two versions alternating (old first, then new first), each probe in its own process; repeats per "
+         f"round: {', '.join(f'{g} {repeats or GROUPS[g][2]}' for g in groups)}. Speed-up is old/new for "
+         "times, new/old for rates; seconds on these shared machines move by about 30 %, the ratio is the "
+         "evidence.", "",
          "| case | baseline | now | speed-up | target | met | offsets now vs baseline (max, deg) |",
          "|---|---:|---:|---:|---|---|---:|"]
+
+    def fmt(v):
+        return "–" if v is None else (f"{v:.0f}" if v >= 100 else f"{v:.3f}")
+
     for r in rows:
-        seconds = r["case"].startswith(("interfoot", "yamane"))
-
-        def fmt(v):
-            return "–" if v is None else (f"{v:.3f} s" if seconds else f"{v:.0f}")
-
-        speedup = f"{r['speedup']:.1f}x" if "speedup" in r else "–"
+        speedup = "–" if r["speedup"] is None else f"{r['speedup']:.2f}x"
         met = "–" if r["met"] is None else ("yes" if r["met"] else "NO")
         diff = r.get("max_offset_difference_deg")
-        L.append(f"| {r['label']} | {fmt(r['old'])} | {fmt(r['new'])} | {speedup} | {r['target']} | {met} | "
+        L.append(f"| {r['label']} | {fmt(r['old'])} | {fmt(r['new'])} | {speedup} | {r['target'] or '–'} | {met} | "
                  f"{'–' if diff is None else f'{diff:.1e}'} |")
+    if stages:
+        L += ["", "Calibration stages (`timing_s`, seconds; a stage the baseline did not time shows –):", "",
+              "| case | stage | baseline | now | speed-up |", "|---|---|---:|---:|---:|"]
+        for s in stages:
+            speedup = "–" if s["speedup"] is None else f"{s['speedup']:.2f}x"
+            L.append(f"| {s['case']} | {s['stage']} | {fmt(s['old'])} | {fmt(s['new'])} | {speedup} |")
+    for side in ("old", "new"):
+        suite = [r for r in runs.get("tests", {}).get(side, [])]
+        for r in suite:
+            for run in r.get("runs", []):
+                L += ["", f"Test command, {'baseline' if side == 'old' else 'now'}: {run['summary']} "
+                      f"(wall {run['wall_s']:.0f} s, exit code {run['returncode']}); the slowest 20:", "",
+                      "| s | phase | test |", "|---:|---|---|"]
+                L += [f"| {d['seconds']:.1f} | {d['phase']} | `{d['test']}` |" for d in run["slowest"]]
     return write_report(out, "\n".join(L) + "\n", {"command": cmd, "provenance": version, "baseline": baseline,
-                                                     "rows": rows, "runs": runs})
+                                                     "rows": rows, "stages": stages, "runs": runs})

@@ -27,6 +27,8 @@ CALIBRATION_CASES = {
     "interfoot_end_to_end": ("interfoot", {}, "total"),  # the default: operating before #35, sensor since
     "interfoot_end_to_end_operating": ("interfoot", dict(setting="operating"), "total"),
     "interfoot_end_to_end_sensor": ("interfoot", dict(setting="sensor"), "total"),
+    "yamane_end_to_end": ("yamane", {}, "total"),
+    "yamane_end_to_end_sensor": ("yamane", dict(weights="sensor"), "total"),
     "interfoot_solve_2point": ("interfoot", dict(n_max=450, trim_fraction=0.0, jacobian="2-point"), "solve"),
     "interfoot_solve_alternating": ("interfoot", dict(n_max=450, trim_fraction=0.0, solver="alternating"), "solve"),
     "yamane_solve_default": ("yamane", dict(n_max=450), "solve"),
@@ -34,7 +36,7 @@ CALIBRATION_CASES = {
 }
 
 
-def probe(data: str, robot: str, repeats: int, collect_repeats: int) -> dict:
+def probe(data: str, robot: str, repeats: int, collect_repeats: int, only: str | None = None) -> dict:
     import legcal_bench
 
     try:  # the registry's home since #35; a baseline commit may be older (this file runs on both)
@@ -50,11 +52,13 @@ def probe(data: str, robot: str, repeats: int, collect_repeats: int) -> dict:
     # since a baseline commit may predate it).
     recs = [r for r in load_session(data, lm.joint_names) if r.kind in ("stance", "standing")]
     out: dict = {"module": os.path.dirname(legcal_bench.__file__), "cases": {}}
-    for name, (cal, options, key) in CALIBRATION_CASES.items():
+    for name, (cal, options, key) in CALIBRATION_CASES.items() if only != "collection" else ():
         runs = [get_calibrator(cal, **options).calibrate(lm, recs) for _ in range(repeats)]
         out["cases"][name] = {"unit": "s", "values": [r.timing_s[key] for r in runs],
                               "offsets": [runs[0].offsets_rad[n] for n in lm.joint_names]}
-    for mode in ("kinematic", "weld"):
+        if key == "total":  # each stage of the calibrator's own timing (`timing_s`)
+            out["cases"][name]["stages"] = {k: [r.timing_s[k] for r in runs] for k in runs[0].timing_s}
+    for mode in ("kinematic", "weld") if only != "calibration" else ():
         rates = []
         for _ in range(collect_repeats):
             with tempfile.TemporaryDirectory() as tmp:
@@ -74,8 +78,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robot", default="a3")
     p.add_argument("--repeats", type=int, default=5)
     p.add_argument("--collect-repeats", type=int, default=1)
+    p.add_argument("--only", choices=("calibration", "collection"), help="one group of cases (default: both)")
     a = p.parse_args(argv)
-    print(json.dumps(probe(a.data, a.robot, a.repeats, a.collect_repeats)))
+    print(json.dumps(probe(a.data, a.robot, a.repeats, a.collect_repeats, a.only)))
     return 0
 
 

@@ -14,7 +14,7 @@ HEAVY = ("torch", "mujoco", "dm_control", "pinocchio", "onnxruntime", "matplotli
 # Their options show a fact kept in a heavy module (the simulation's effect, offset and
 # sensor names; the training default; the speed baseline): they add their options on
 # first use, so only their own use pays.
-BUILT_ON_USE = ("collect", "walk", "train-policy", "bench-speed")
+BUILT_ON_USE = ("collect", "walk", "train-policy")
 
 CHILD = r"""
 import contextlib, io, json, sys
