@@ -16,8 +16,10 @@ the working folder starts from none.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -27,8 +29,9 @@ for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 
-def once(seeds: int, cases: list[str], extra: list[str]) -> tuple[float, int]:
-    """(wall seconds, session sets) of one run of the suite, from a fresh folder."""
+def once(seeds: int, cases: list[str], extra: list[str], save: str | None = None) -> tuple[float, int]:
+    """(wall seconds, session sets) of one run of the suite, from a fresh folder (its
+    report, modelgap.json, copied to `save`); what the command prints goes to stderr."""
     from legcal_bench.cli import main
 
     here = os.getcwd()
@@ -40,12 +43,16 @@ def once(seeds: int, cases: list[str], extra: list[str]) -> tuple[float, int]:
             argv = ["bench", "--suite", "modelgap", "--cases", *cases, "--seeds", str(seeds), "--out",
                     os.path.join(tmp, "lb"), "--data", os.path.join(tmp, "data"), "--quiet", *extra]
             t0 = time.perf_counter()
-            code = main(argv)
+            with contextlib.redirect_stdout(sys.stderr):
+                code = main(argv)
             wall = time.perf_counter() - t0
             if code:
                 raise SystemExit(f"legcal-bench {' '.join(argv)} exited with {code}")
-            with open(os.path.join(tmp, "lb", "modelgap", "modelgap.json")) as f:
+            report = os.path.join(tmp, "lb", "modelgap", "modelgap.json")
+            with open(report) as f:
                 sets = len(json.load(f)["rows"])
+            if save:
+                shutil.copyfile(report, save)
         finally:
             os.chdir(here)
     return wall, sets
@@ -58,13 +65,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--cases", nargs="+", default=["clean", "library"])
     p.add_argument("--robots", nargs="+", default=None, help="default: the suite's")
     p.add_argument("--workers", type=int, default=None, help="default: the command's")
+    p.add_argument("--save", default=None, help="copy the last run's modelgap.json here (to compare results)")
     a = p.parse_args(argv)
     extra = (["--robots", *a.robots] if a.robots else []) + (["--workers", str(a.workers)] if a.workers else [])
     import legcal_bench
 
     totals, sets = [], None
     for _ in range(a.repeats):
-        wall, n = once(a.seeds, a.cases, extra)
+        wall, n = once(a.seeds, a.cases, extra, a.save and os.path.abspath(a.save))
         totals.append(wall)
         sets = n
         print(f"modelgap: {n} sets in {wall:.1f} s ({wall / n:.2f} s a set)", file=sys.stderr)
