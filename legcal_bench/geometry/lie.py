@@ -54,12 +54,23 @@ _SERIES = np.array([[float(Fraction((-1) ** k, factorial(2 * k + 1))),
 _POWERS = np.arange(len(_SERIES))
 
 
+def _powers(theta: np.ndarray) -> np.ndarray:
+    """(..., 10) the powers theta^(2k), k = 0..9, by repeated products (an integer power
+    per element costs several times more)."""
+    out = np.empty(theta.shape + (len(_POWERS),))
+    out[..., 0] = 1.0
+    out[..., 1] = theta * theta
+    for k in range(2, len(_POWERS)):
+        np.multiply(out[..., k - 1], out[..., 1], out=out[..., k])
+    return out
+
+
 def _coefficients(theta: np.ndarray) -> np.ndarray:
     """(..., 6) coefficients [a, b, c, d, e, f] (see _SERIES) at rotation angles theta >= 0."""
     theta = np.asarray(theta, dtype=float)
     small = theta < SERIES_BELOW
     if small.all():
-        return (theta[..., None] ** 2) ** _POWERS @ _SERIES
+        return _powers(theta) @ _SERIES
     t = np.maximum(theta, SERIES_BELOW)  # closed forms, evaluated away from 0 and used only there
     t2 = t * t
     h = 0.5 * t
@@ -73,7 +84,7 @@ def _coefficients(theta: np.ndarray) -> np.ndarray:
     closed = np.stack([a, b, c, d, e, f], axis=-1)
     if not small.any():
         return closed
-    series = (np.minimum(theta, SERIES_BELOW)[..., None] ** 2) ** _POWERS @ _SERIES
+    series = _powers(np.minimum(theta, SERIES_BELOW)) @ _SERIES
     return np.where(small[..., None], series, closed)
 
 
@@ -103,7 +114,11 @@ def _hat(v: np.ndarray) -> np.ndarray:
 def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
     u0, u1, u2 = u[..., 0], u[..., 1], u[..., 2]
     v0, v1, v2 = v[..., 0], v[..., 1], v[..., 2]
-    return np.stack([u1 * v2 - u2 * v1, u2 * v0 - u0 * v2, u0 * v1 - u1 * v0], axis=-1)
+    out = np.empty(np.broadcast_shapes(u.shape, v.shape))
+    out[..., 0] = u1 * v2 - u2 * v1
+    out[..., 1] = u2 * v0 - u0 * v2
+    out[..., 2] = u0 * v1 - u1 * v0
+    return out
 
 
 def _dot(u: np.ndarray, v: np.ndarray) -> np.ndarray:
@@ -144,8 +159,11 @@ def Log(T) -> np.ndarray:
     T = _pose(T, "Log")
     R, p = T[..., :3, :3], T[..., :3, 3]
     # sin(theta) u and cos(theta), u the unit axis.
-    vee = 0.5 * np.stack([R[..., 2, 1] - R[..., 1, 2], R[..., 0, 2] - R[..., 2, 0], R[..., 1, 0] - R[..., 0, 1]],
-                         axis=-1)
+    vee = np.empty(R.shape[:-1])
+    vee[..., 0] = R[..., 2, 1] - R[..., 1, 2]
+    vee[..., 1] = R[..., 0, 2] - R[..., 2, 0]
+    vee[..., 2] = R[..., 1, 0] - R[..., 0, 1]
+    vee *= 0.5
     s = _angle(vee)
     cos = 0.5 * (np.trace(R, axis1=-2, axis2=-1) - 1.0)
     theta = np.arctan2(s, cos)
@@ -198,6 +216,32 @@ def _left(tau: np.ndarray, inverse_: bool) -> np.ndarray:
     return out
 
 
+def _inverse_pair(tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(Jr_inv(tau), Jl_inv(tau)) = (_left(-tau, True), _left(tau, True)) sharing what
+    does not change sign with tau (the coefficients, s, the even parts of Q and J), each
+    sum in `_left`'s order, so both are what `_left` gives bit for bit."""
+    rho, w = tau[..., :3], tau[..., 3:]
+    theta = _angle(w)
+    t2 = theta**2
+    k = _coefficients(theta)
+    b, c, d, e, f = (k[..., i, None] for i in range(1, 6))
+    s = _dot(w, rho)[..., None]
+    v = 0.5 * rho + s * (d - c) * w + d * _cross(w, _cross(w, rho))  # odd in tau
+    q1, q2 = _outer(rho, c * w), _outer(w, c * rho - 2.0 * e * s * w)  # even
+    q3 = _scale((2.0 * s * (e * t2[..., None] - c))[..., 0], np.eye(3))
+    j2, j3 = _outer(f * w, w), _scale(1.0 - f[..., 0] * t2, np.eye(3))
+    out = []
+    for sign in (-1.0, 1.0):
+        Q = _hat(sign * v) + q1 + q2
+        Q += q3
+        J = _hat(-0.5 * (sign * w)) + j2 + j3
+        A = np.zeros(tau.shape[:-1] + (6, 6))
+        A[..., :3, 3:] = -J @ Q @ J
+        A[..., :3, :3] = A[..., 3:, 3:] = J
+        out.append(A)
+    return out[0], out[1]
+
+
 def Jr(tau) -> np.ndarray:
     """(..., 6) -> (..., 6, 6) right Jacobian of Exp."""
     return _left(-_tangent(tau, "Jr"), False)
@@ -212,6 +256,11 @@ def Jr_inv(tau) -> np.ndarray:
     """(..., 6) -> (..., 6, 6) inverse right Jacobian at tau; at tau = Log(T) it is
     Pinocchio's Jlog6(T)."""
     return _left(-_tangent(tau, "Jr_inv"), True)
+
+
+def Jr_Jl_inv(tau) -> tuple[np.ndarray, np.ndarray]:
+    """(Jr_inv(tau), Jl_inv(tau)) together, for less than the two apart."""
+    return _inverse_pair(_tangent(tau, "Jr_Jl_inv"))
 
 
 def Jl_inv(tau) -> np.ndarray:

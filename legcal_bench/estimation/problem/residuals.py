@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.geometry.lie import Jl_inv, Jr_inv, Log, inverse
+from legcal_bench.geometry.lie import Jl_inv, Jr_inv, Jr_Jl_inv, Log, inverse
 from legcal_bench.robots.kinematics import FrameKinematics
 
 # d(R e_z)/d(omega) in the rotated frame: omega x e_z = [w_y, -w_x, 0].
@@ -90,12 +90,15 @@ def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fix
     """(N, 6) residuals Log(M^-1 C_k) and (N, 6, 12) Jacobians.
 
     mode "fixed": M held constant (the paper's inner solve); "projected": M = M(dq)
-    re-estimated with dq (variable projection; requires M to be the Frechet mean)."""
+    re-estimated with dq (variable projection; requires M to be the Frechet mean);
+    "both": (r, the fixed Jacobian, the projected one)."""
     r = Log(inverse(M) @ C)
-    J = Jr_inv(r) @ G
-    if mode == "projected":
-        J = project_mean(J, r)
-    return r, J
+    if mode == "fixed":
+        return r, Jr_inv(r) @ G
+    A, B = Jr_Jl_inv(r)
+    J = A @ G
+    projected = _project(J, B)
+    return (r, J, projected) if mode == "both" else (r, projected)
 
 
 def project_mean(J: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -105,7 +108,11 @@ def project_mean(J: np.ndarray, r: np.ndarray) -> np.ndarray:
     be projected this way: a plain average instead differs from it by O(|r|), which breaks
     exact collinearities (a constant twist of one sole is a mean change) at ~1e-4 and
     leaves directions made of the residual itself."""
-    B = Jl_inv(r)
+    return _project(J, Jl_inv(r))
+
+
+def _project(J: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """`project_mean` with B = Jl_inv(r) given."""
     return J - B @ np.linalg.solve(B.sum(axis=0), J.sum(axis=0))
 
 

@@ -18,8 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.estimation.problem.problem import Term
-from legcal_bench.estimation.problem.residuals import (feet_residuals, flat_residuals, flat_residuals_extended,
-                                                       project_mean)
+from legcal_bench.estimation.problem.residuals import feet_residuals, flat_residuals, flat_residuals_extended
 from legcal_bench.geometry.lie import frechet_mean
 from legcal_bench.robots.kinematics import FrameKinematics, LegKinematics, frame_kinematics
 
@@ -78,9 +77,9 @@ class InterFootTerm(Term):
         fk = self.seg.state(x)
         if self.mode == "projected":
             self.update_mean(x)
-        r, J = feet_residuals(fk.C, fk.G, self.mean, "projected" if self.mode == "projected" else "fixed")
+        r, J, *projected = feet_residuals(fk.C, fk.G, self.mean, self.mode)
         if self.mode == "both":
-            self.projected = self._weighted(project_mean(J, r))
+            self.projected = self._weighted(projected[0])
         return (self.w * r).ravel(), self._weighted(J)
 
     def _weighted(self, J: np.ndarray) -> dict[str, np.ndarray]:
