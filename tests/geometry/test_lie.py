@@ -293,3 +293,12 @@ def test_jacobians_against_high_precision_differences():
                 ref[:, k] = [float((a - b) / (2 * h)) for a, b in zip(*cols)]
         np.testing.assert_allclose(Jr(tau), ref, rtol=0, atol=5e-16)
         np.testing.assert_allclose(Jr_inv(tau), np.linalg.inv(ref), rtol=0, atol=1e-15)
+
+
+@pytest.mark.parametrize("scale", [0.0, 1e-9, 1e-4, 1e-2, 0.5, 2.0, 3.1])
+def test_the_inverse_jacobians_together_are_the_two_apart_bit_for_bit(scale):
+    from legcal_bench.geometry.lie import Jr_Jl_inv
+
+    tau = np.random.default_rng(7).normal(size=(200, 6)) * scale
+    right, left = Jr_Jl_inv(tau)
+    assert np.array_equal(right, Jr_inv(tau)) and np.array_equal(left, Jl_inv(tau))
