@@ -37,7 +37,7 @@ def _torch(module) -> Model:
     buffers = {k: v.detach().clone() for k, v in module.named_buffers()}
 
     def run(obs: np.ndarray) -> np.ndarray:
-        with torch.inference_mode():
+        with torch.inference_mode():  # (an LSTM's kernels differ outside it)
             out = module(torch.from_numpy(obs[None]))
         if isinstance(out, (tuple, list)):
             out = out[0]
@@ -48,7 +48,58 @@ def _torch(module) -> Model:
             for k, v in module.named_buffers():
                 v.copy_(buffers[k])
 
-    return Model(run, reset)
+    return Model(_eager_mlp(module, run) or run, reset)
+
+
+# Layers an eager replica knows: (type name, the function of its input).
+_EAGER_LAYERS = {"Linear": lambda F, m: lambda x, w=m.weight.detach(), b=None if m.bias is None else m.bias.detach():
+                 F.linear(x, w, b),
+                 "ELU": lambda F, m: lambda x, a=float(getattr(m, "alpha", 1.0)): F.elu(x, a),
+                 "ReLU": lambda F, m: F.relu, "Tanh": lambda F, m: lambda x: x.tanh(), "Identity": lambda F, m: None}
+EAGER_PROBES = 64  # random observations an eager replica must answer bit for bit as the file's module does
+
+
+def _eager_mlp(module, run: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray] | None:
+    """The same network run layer by layer from Python, where the file's module is an MLP
+    (a Sequential of `_EAGER_LAYERS`, alone or as `mlp` after a `(obs - mean) / std`
+    normalization, no other state): the same kernels without the TorchScript
+    interpreter's per-call cost (a tenth of a walk's step). Used only if it gives every
+    probe observation's action bit for bit; None otherwise (the module runs as it is)."""
+    import torch
+    import torch.nn.functional as F
+
+    kind = lambda m: getattr(m, "original_name", type(m).__name__)  # noqa: E731  (scripted modules keep it)
+    children = dict(module.named_children())
+    buffers = dict(module.named_buffers(recurse=False))
+    seq, norm = module, None
+    if set(children) == {"mlp"} and set(buffers) == {"mean", "std"}:
+        seq, norm = children["mlp"], (buffers["mean"].detach(), buffers["std"].detach())
+    elif buffers:
+        return None
+    layers = list(seq.named_children())
+    if not layers or kind(seq) != "Sequential" or any(kind(m) not in _EAGER_LAYERS or any(m.named_buffers())
+                                                     for _, m in layers):
+        return None
+    fns = [f for f in (_EAGER_LAYERS[kind(m)](F, m) for _, m in layers) if f is not None]
+    first = layers[0][1]
+    if kind(first) != "Linear":
+        return None
+
+    def eager(obs: np.ndarray) -> np.ndarray:
+        x = torch.from_numpy(obs[None])
+        if norm is not None:
+            x = (x - norm[0]) / norm[1]
+        for f in fns:
+            x = f(x)
+        return x.numpy().reshape(-1).astype(np.float64)
+
+    rng = np.random.default_rng(0)
+    probes = rng.standard_normal((EAGER_PROBES, first.weight.shape[1])) * rng.choice([0.01, 1.0, 100.0], (EAGER_PROBES, 1))
+    try:
+        same = all(np.array_equal(run(x), eager(x)) for x in probes.astype(np.float32))
+    except Exception:  # noqa: BLE001  (a layer the replica misreads: the module runs as it is)
+        return None
+    return eager if same else None
 
 
 def load_model(path, fmt: str, n_obs: int, n_act: int, where: str = "policy") -> Model:

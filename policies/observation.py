@@ -55,9 +55,15 @@ def _joints(values: np.ndarray, ctx: ObsContext, t) -> np.ndarray:
     return v if t.mask is None else v[t.mask_index]
 
 
+_NO_OFFSET = np.zeros(1)
+
+
 def _phase(ctx: ObsContext, t, offsets) -> np.ndarray:
     a = 2 * np.pi * (ctx.time / t.period + np.asarray(offsets))
-    return np.stack([np.sin(a), np.cos(a)], axis=1).ravel()
+    out = np.empty((len(a), 2))  # [sin, cos] per offset
+    np.sin(a, out=out[:, 0])
+    np.cos(a, out=out[:, 1])
+    return out.ravel()
 
 
 TERMS: dict[str, Term] = {
@@ -72,7 +78,7 @@ TERMS: dict[str, Term] = {
                       per_joint=True),
     "last_action": Term(lambda c, t: c.last_action if t.mask is None else c.last_action[t.mask_index],
                         lambda n, t: n if t.mask is None else len(t.mask), per_joint=True),
-    "phase": Term(lambda c, t: _phase(c, t, [0.0]), lambda n, t: 2, needs_period=True),
+    "phase": Term(lambda c, t: _phase(c, t, _NO_OFFSET), lambda n, t: 2, needs_period=True),
     "time": Term(lambda c, t: np.array([c.time]), lambda n, t: 1),
     "foot_phase": Term(lambda c, t: _phase(c, t, t.offsets), lambda n, t: 2 * len(t.offsets), needs_period=True),
 }
@@ -105,8 +111,11 @@ def observation_size(spec, terms=None) -> int:
 
 
 def build_observation(terms: list[BoundTerm], ctx: ObsContext) -> np.ndarray:
+    """The policy's observation vector (float32): each term scaled, then clipped."""
     parts = []
     for t in terms:
-        v = np.asarray(TERMS[t.term].read(ctx, t), dtype=float) * t.scale
-        parts.append(np.clip(v, -t.clip, t.clip) if t.clip is not None else v)
+        v = np.multiply(TERMS[t.term].read(ctx, t), t.scale, dtype=float)
+        if t.clip is not None:  # np.clip's arithmetic (max, then min), without its wrapper
+            v = np.minimum(np.maximum(v, -t.clip), t.clip)
+        parts.append(v)
     return np.concatenate(parts).astype(np.float32)

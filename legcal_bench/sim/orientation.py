@@ -38,9 +38,10 @@ class GravityFilter:
 
     def update(self, acc: np.ndarray, gyro: np.ndarray, dt: float) -> np.ndarray:
         """One step of `dt` with the mean specific force `acc` and mean rate `gyro`."""
+        acc = np.asarray(acc, dtype=float)
         g = pin.exp3(np.asarray(gyro, dtype=float) * dt).T @ self.down
-        norm = np.linalg.norm(acc)
+        norm = np.sqrt(acc.dot(acc))  # np.linalg.norm's arithmetic for a vector, without its checks
         if norm > 1e-6:  # free fall leaves the gyro alone
-            g = g + (dt / self.tau_s) * (-np.asarray(acc) / norm - g)
-        self.down = g / np.linalg.norm(g)
+            g = g + (dt / self.tau_s) * (-acc / norm - g)
+        self.down = g / np.sqrt(g.dot(g))
         return self.down

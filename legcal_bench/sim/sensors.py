@@ -72,6 +72,11 @@ class SensorModel:
     def to_dict(self) -> dict:
         return asdict(self)
 
+    @cached_property
+    def ft_std(self) -> np.ndarray:
+        """(6,) the force/torque sensor's noise per axis [force x3, torque x3]."""
+        return np.array([self.ft_force_noise_std] * 3 + [self.ft_torque_noise_std] * 3)
+
     @property
     def tilt_bound(self) -> float:
         """Bound on the IMU's static vertical error (rad) near level: mounting tilt plus
@@ -111,6 +116,11 @@ class ImuErrors:
         """Rotation of the actual IMU frame in the nominal IMU frame (computed once)."""
         return Rotation.from_euler("xyz", self.imu_mount_rpy).as_matrix()
 
+    @cached_property
+    def biases(self) -> tuple[np.ndarray, np.ndarray]:
+        """(accelerometer, gyro) bias as arrays (made once: the IMU reads them every sample)."""
+        return np.asarray(self.accel_bias), np.asarray(self.gyro_bias)
+
     def vertical(self, up_I: np.ndarray) -> np.ndarray:
         """The up direction a static accelerometer reports, in the nominal IMU frame,
         when the true one is `up_I` (noise-free): tilted by the mount, pulled by the bias."""
@@ -128,25 +138,47 @@ class SimSensors:
     # (q - offset) / (1 + scale), so q = q_enc + scale q_enc + offset (issue #16's effect).
     encoder_scale: tuple[float, ...] = ()
 
-    def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator,
+                 noise: np.ndarray | None = None) -> np.ndarray:
+        """Encoder readings; `noise`: standard normal draws to use instead of drawing
+        from `rng` (the same numbers give the same readings, whatever the batch)."""
         m = self.model
         if self.encoder_scale:
             q_true_minus_offset = q_true_minus_offset / (1.0 + np.asarray(self.encoder_scale))
-        q = q_true_minus_offset + m.encoder_noise_std * rng.standard_normal(q_true_minus_offset.shape)
+        if noise is None:
+            noise = rng.standard_normal(q_true_minus_offset.shape)
+        q = q_true_minus_offset + m.encoder_noise_std * noise
         if m.encoder_resolution > 0:
-            q = np.round(q / m.encoder_resolution) * m.encoder_resolution
+            q = np.rint(q / m.encoder_resolution) * m.encoder_resolution  # np.round with 0 decimals is rint
         return q
 
     def imu(self, specific_force: np.ndarray, gyro: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-        R, e, m = self.errors.mount_rotation, self.errors, self.model
-        acc = R.T @ specific_force + np.asarray(e.accel_bias) + m.accel_noise_std * rng.standard_normal(3)
-        gyr = R.T @ gyro + np.asarray(e.gyro_bias) + m.gyro_noise_std * rng.standard_normal(3)
+        R, (acc_bias, gyro_bias), m = self.errors.mount_rotation, self.errors.biases, self.model
+        acc = R.T @ specific_force + acc_bias + m.accel_noise_std * rng.standard_normal(3)
+        gyr = R.T @ gyro + gyro_bias + m.gyro_noise_std * rng.standard_normal(3)
         return acc, gyr
 
-    def force_torque(self, wrench: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-        """(2, 6) ankle wrenches [force, torque] with noise."""
-        std = np.array([self.model.ft_force_noise_std] * 3 + [self.model.ft_torque_noise_std] * 3)
-        return wrench + std * rng.standard_normal(wrench.shape)
+    def imu_samples(self, samples: np.ndarray, noise: np.ndarray) -> np.ndarray:
+        """`imu` of many samples in one call: `samples` (N, 2, 3) or (2N, 3), [specific
+        force, angular rate] per sample (IMU frame), `noise` the same shape of standard
+        normal draws (per sample: accelerometer's, then gyro's, as `imu` draws them).
+        The same products and sums as one sample at a time (a broadcast matmul: a
+        matrix-vector product per row)."""
+        pairs = samples.reshape(-1, 2, 3)
+        bias, std = self._imu_rows
+        out = np.matmul(self.errors.mount_rotation.T, pairs[..., None])[..., 0] + bias + std * noise.reshape(pairs.shape)
+        return out.reshape(samples.shape)
+
+    @cached_property
+    def _imu_rows(self) -> tuple[np.ndarray, np.ndarray]:
+        """Bias (2, 3) and noise level (2, 1) of [accelerometer, gyro]."""
+        m = self.model
+        return np.stack(self.errors.biases), np.array([[m.accel_noise_std], [m.gyro_noise_std]])
+
+    def force_torque(self, wrench: np.ndarray, rng: np.random.Generator, noise: np.ndarray | None = None) -> np.ndarray:
+        """(..., 2, 6) ankle wrenches [force, torque] with noise (`noise`: standard normal
+        draws of that shape, instead of drawing from `rng`)."""
+        return wrench + self.model.ft_std * (rng.standard_normal(wrench.shape) if noise is None else noise)
 
 
 # A typical full-size humanoid: 17-bit absolute joint encoders with a little electrical

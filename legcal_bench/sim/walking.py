@@ -50,6 +50,7 @@ FALL_HEIGHT_FRACTION = 0.6  # fallen: the pelvis below this fraction of its star
 FALL_TILT_RAD = 1.0  # ... or its z axis more than this from vertical (57 deg)
 TOUCHDOWN_FRACTION = 0.15  # of the robot's weight on a foot: touchdown (after liftoff)
 LIFTOFF_FRACTION = 0.03  # of the robot's weight: the foot is off the floor
+_COS_FALL_TILT = float(np.cos(FALL_TILT_RAD))
 
 
 @dataclass(frozen=True)
@@ -152,6 +153,13 @@ class WalkingSim:
                                         for s in SIDES for k in ("force", "torque")]) if sc.has_ft else None)
         free = int(np.flatnonzero(m.jnt_qposadr == sc.free_qpos_adr)[0])
         self._free_dof = int(m.jnt_dofadr[free])
+        # Worked out once, used every control step: which geoms belong to a foot (side x
+        # geom), the differentiated encoders' noise, gravity's specific force.
+        self._foot_geom_lists = tuple(self._foot_bodies[s].tolist() for s in SIDES)
+        self._dq_sigma = np.sqrt(2) * sensor.model.encoder_noise_std / config.physics_dt
+        self._up_g = np.array([0.0, 0.0, 9.81])
+        self._n_noise = 36 + (12 if sc.has_ft else 0)  # standard normal draws per `observe`
+        self._imu4 = np.empty((4, 3))  # the IMU's two samples per `observe`: [acc, gyro] now, over the step
         self.offsets = np.zeros(12)
         self.correction = np.zeros(12)
 
@@ -207,13 +215,14 @@ class WalkingSim:
 
     def step(self, target: np.ndarray) -> None:
         """Hold `target` (encoder space, corrected) for one control step."""
-        self._ctrl(np.asarray(target, dtype=float))
-        mujoco.mj_step(self.model, self.data, nstep=self.config.decimation)
-        self.time += self.config.control_dt
+        m, d, cfg = self.model, self.data, self.config
+        d.ctrl[self.scene.servo[0]] = target + self.offsets - self.correction  # `_true_target`
+        mujoco.mj_step(m, d, nstep=cfg.decimation)
+        self.time += cfg.control_dt
         # The IMU's rate and specific force averaged over the step (a high-rate filter's input).
         (R0, v0), (R1, v1) = self._imu_state, self._imu_kinematics()
-        T = self.config.control_dt
-        self._imu_mean = (R1.T @ ((v1 - v0) / T + np.array([0.0, 0.0, 9.81])), pin.log3(R0.T @ R1) / T)
+        T = cfg.control_dt
+        self._imu_mean = (R1.T @ ((v1 - v0) / T + self._up_g), pin.log3(R0.T @ R1) / T)
         self._imu_state = (R1, v1)
         self._events()
 
@@ -222,25 +231,30 @@ class WalkingSim:
         """The IMU site's orientation (world) and linear velocity (world)."""
         v = np.empty(6)
         mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_SITE, self.scene.imu_site, v, 0)
-        return self.data.site_xmat[self.scene.imu_site].reshape(3, 3).copy(), v[3:].copy()
+        return self.data.site_xmat[self.scene.imu_site].reshape(3, 3).copy(), v[3:]
 
     def _true_imu(self) -> tuple[np.ndarray, np.ndarray]:
         s = self.data.sensordata[self._imu_adr]
         return s[:3], s[3:]
 
     def observe(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
-        """What the robot's software reads now (corrected encoders)."""
+        """What the robot's software reads now (corrected encoders). Random draws, in
+        order: encoders (12), joint velocities (12), the IMU now (accelerometer 3, gyro
+        3), the filter's IMU sample over the step (3 + 3), force/torque (12); drawn at
+        once (the same numbers), the IMU's two samples read in one call."""
         sc, d, sen = self.scene, self.data, self.sensor
-        q_true = d.qpos[sc.qpos_adr]
-        q_enc = sen.encoders(q_true - self.offsets, rng)
-        sigma = np.sqrt(2) * sen.model.encoder_noise_std / self.config.physics_dt
-        dq = d.qvel[sc.dof_adr] + sigma * rng.standard_normal(12)
-        acc, gyro = sen.imu(*self._true_imu(), rng)
-        down_I = self.filter.update(*sen.imu(*self._imu_mean, rng), self.config.control_dt)
+        noise = rng.standard_normal(self._n_noise)
+        q_enc = sen.encoders(d.qpos[sc.qpos_adr] - self.offsets, rng, noise[:12])
+        dq = d.qvel[sc.dof_adr] + self._dq_sigma * noise[12:24]
+        imu = self._imu4
+        imu[:2] = d.sensordata[self._imu_adr].reshape(2, 3)  # `_true_imu`
+        imu[2], imu[3] = self._imu_mean
+        acc, gyro, acc_mean, gyro_mean = sen.imu_samples(imu, noise[24:36])
+        down_I = self.filter.update(acc_mean, gyro_mean, self.config.control_dt)
         obs = {"q_enc": q_enc + self.correction, "dq_enc": dq, "imu_acc": acc, "imu_gyro": gyro,
                "gravity": self.R_BI @ down_I}
         if self._ft_adr is not None:
-            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng)
+            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng, noise[36:].reshape(2, 6))
         return obs
 
     # ------------------------------------------------------------ ground truth
@@ -248,18 +262,26 @@ class WalkingSim:
         """Vertical contact force on each foot (N): left, right."""
         m, d = self.model, self.data
         loads = np.zeros(2)
+        n = d.ncon
+        if not n:
+            return loads
+        con, (left, right) = d.contact, self._foot_geom_lists
+        g1, g2, nz = con.geom1.tolist(), con.geom2.tolist(), con.frame[:, 2]
         f6 = np.zeros(6)
-        for i in range(d.ncon):
-            c = d.contact[i]
-            for k, s in enumerate(SIDES):
-                if self._foot_bodies[s][c.geom1] or self._foot_bodies[s][c.geom2]:
-                    mujoco.mj_contactForce(m, d, i, f6)
-                    loads[k] += abs(f6[0] * c.frame[2])  # normal force times the normal's z
+        for i in range(n):
+            a, b = g1[i], g2[i]
+            on = (left[a] or left[b], right[a] or right[b])
+            if on[0] or on[1]:
+                mujoco.mj_contactForce(m, d, i, f6)
+                f = abs(f6[0] * nz[i])  # normal force times the normal's z
+                for k in (0, 1):
+                    if on[k]:
+                        loads[k] += f
         return loads
 
     def _events(self) -> None:
         self.loads = self.foot_loads()
-        loads = self.loads / self.weight
+        loads = (self.loads / self.weight).tolist()
         d, sc = self.data, self.scene
         for k, s in enumerate(SIDES):
             if loads[k] < LIFTOFF_FRACTION:
@@ -285,19 +307,20 @@ class WalkingSim:
 
     def fallen(self) -> bool:
         f = self.scene.free_qpos_adr
-        w, x, y, _ = self.data.qpos[f + 3:f + 7]
+        z, w, x, y, _ = self.data.qpos[f + 2:f + 7].tolist()
         cos_tilt = 1 - 2 * (x * x + y * y)  # z axis of the pelvis against vertical
-        return bool(self.data.qpos[f + 2] < FALL_HEIGHT_FRACTION * self.start_height
-                    or cos_tilt < np.cos(FALL_TILT_RAD))
+        return z < FALL_HEIGHT_FRACTION * self.start_height or cos_tilt < _COS_FALL_TILT
 
     def torques(self) -> np.ndarray:
         return self.data.actuator_force[self.scene.servo[0]].copy()
 
-    def power(self) -> float:
+    def power(self, torques: np.ndarray | None = None) -> float:
         """Mechanical power of the leg servos (W): sum |tau * qdot|."""
-        return float(np.abs(self.torques() * self.data.qvel[self.scene.dof_adr]).sum())
+        tau = self.torques() if torques is None else torques
+        return float(np.abs(tau * self.data.qvel[self.scene.dof_adr]).sum())
 
     def truth(self) -> dict:
-        return {"time": self.time, "pelvis_pose": self.pelvis_pose(), "q_true": self.data.qpos[self.scene.qpos_adr].copy(),
-                "torque": self.torques(), "power": self.power(), "fallen": self.fallen_at is not None,
+        tau = self.torques()
+        return {"time": self.time, "pelvis_pose": self.pelvis_pose(), "q_true": self.data.qpos[self.scene.qpos_adr],
+                "torque": tau, "power": self.power(tau), "fallen": self.fallen_at is not None,
                 "fallen_at": self.fallen_at, "offsets": self.offsets.copy(), "correction": self.correction.copy()}

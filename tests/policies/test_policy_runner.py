@@ -3,6 +3,8 @@ refusals (issue #13)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 import yaml
@@ -174,3 +176,32 @@ def test_paper_at_deg_has_the_papers_signs_by_role_and_one_magnitude():
         assert signs == {"hip_pitch": 1, "hip_roll": 1, "hip_yaw": -1, "knee": -1, "ankle_pitch": 1, "ankle_roll": -1}
     with pytest.raises(OffsetSpecError, match="paper@<deg>"):
         resolve_offsets("paper@x", A3)
+
+
+def test_an_mlp_runs_eagerly_with_its_modules_actions_and_other_networks_as_they_are(tmp_path):
+    import torch
+
+    from legcal_bench.policies.models import load_model
+
+    # Our walkers: (obs - mean) / std into an MLP; the eager replica answers bit for bit.
+    shipped = Path(__file__).resolve().parents[2] / "policies" / "walkers" / "a3" / "policy.pt"
+    module = torch.jit.load(str(shipped))
+    model = load_model(shipped, "torchscript", 45, 12)
+    assert model._run.__name__ == "eager"
+    for x in np.random.default_rng(3).standard_normal((20, 45)).astype(np.float32):
+        with torch.inference_mode():
+            expected = module(torch.from_numpy(x[None])).numpy().reshape(-1).astype(np.float64)
+        assert np.array_equal(model(x), expected)
+    # A traced Sequential too; a network with state (an LSTM, a counter) runs as it is.
+    export_all(tiny_net(), tmp_path)
+    assert load_model(tmp_path / "policy.pt", "torchscript", N_OBS, 12)._run.__name__ == "eager"
+    class Recurrent(torch.nn.Module):
+        def __init__(self):
+            super().__init__()
+            self.lstm = torch.nn.LSTM(N_OBS, 12, batch_first=True)
+
+        def forward(self, x):
+            return self.lstm(x[:, None])[0][:, 0]
+
+    torch.jit.trace(Recurrent().eval(), torch.zeros(1, N_OBS)).save(str(tmp_path / "lstm.pt"))
+    assert load_model(tmp_path / "lstm.pt", "torchscript", N_OBS, 12)._run.__name__ == "run"

@@ -24,3 +24,18 @@ def test_a_z_bias_scales_an_off_level_tilt_reading():
     # atan(g sin t / (g cos t + b)) - t = -(b/g) sin t to first order in b/g: a tilt read
     # about b/g short, 0.2 mrad at 0.2 rad for the 1 mg the calibrated-imu preset once had
     assert read_tilt - tilt == pytest.approx(-(b / G) * np.sin(tilt), rel=0.01)
+
+
+@pytest.mark.parametrize("name", sorted(SENSOR_PRESETS))
+def test_many_samples_read_at_once_are_the_samples_read_one_at_a_time(name):
+    """The simulators read the IMU and encoders of many samples in one call (a walk's
+    step, a recorded segment) with the random draws of one sample at a time, in order."""
+    s, rng = SENSOR_PRESETS[name], np.random.default_rng(7)
+    f, w, q = rng.normal(0, 9.81, (50, 3)), rng.normal(0, 0.5, (50, 3)), rng.normal(0, 1, (50, 12))
+    a, b = np.random.default_rng(1), np.random.default_rng(1)
+    one = [(s.imu(f[i], w[i], a), s.encoders(q[i], a)) for i in range(50)]
+    noise = b.standard_normal((50, 18))
+    imu = s.imu_samples(np.stack([f, w], axis=1), noise[:, :6])
+    assert np.array_equal(imu, np.array([[acc, gyr] for (acc, gyr), _ in one]))
+    assert np.array_equal(s.encoders(q, None, noise[:, 6:]), np.array([e for _, e in one]))
+    assert a.random() == b.random()  # the same stream, left in the same place
