@@ -23,8 +23,12 @@ demo: $(STAMP)
 	rm -rf runs/demo
 	$(BIN)/legcal-bench bench --suite smoke --out runs/demo --data runs/demo/data
 
+# Tests run in TEST_WORKERS processes (pytest-xdist; 2, the CI machine's cores);
+# TEST_WORKERS=0 runs them in this one. Tests that start worker pools of their own
+# size them to the cores left per test process (tests/conftest.py, pool_workers).
+TEST_WORKERS ?= 2
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(TEST_WORKERS)
 
 bench-env: $(STAMP)
 	$(BIN)/legcal-bench bench-env --out reports/bench_env

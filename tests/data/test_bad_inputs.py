@@ -25,6 +25,8 @@ from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.sensors import sensor_model
 
+pytestmark = pytest.mark.xdist_group("bad_inputs")  # one process collects `session` (and `a3_result`) for all
+
 
 @pytest.fixture(scope="module")
 def session(tmp_path_factory) -> Path:

@@ -24,6 +24,9 @@ ARRAYS = ("time", "q_enc", "imu_acc", "imu_gyro", "ft")
 META = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model", "source", "session",
         "motion")
 OUTCOMES = {"refused": 0, "calibrated": 0}
+# Both tests in one process, in order: the second reads the outcomes the first counted
+# (spread over pytest-xdist's processes, it would run the 300 mutations again).
+pytestmark = pytest.mark.xdist_group("fuzz")
 
 
 @pytest.fixture(scope="module")

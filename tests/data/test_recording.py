@@ -10,6 +10,7 @@ from legcal_bench.robots import load_robot
 from legcal_bench.sim.sensors import SENSOR_PRESETS
 
 SHORT = dict(stance_s=1.0, heldout_s=0.6, standing_s=0.4, heldout=1, stances=("I", "II"))
+pytestmark = pytest.mark.xdist_group("recording")  # one process collects `session` for all
 
 
 @pytest.fixture(scope="module")

@@ -14,6 +14,8 @@ from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.reports.contact_table import true_departures
 from legcal_bench.robots import load_robot
 
+pytestmark = pytest.mark.xdist_group("coplanarity")  # one process collects `sets` for all
+
 
 def test_the_departure_jacobian_matches_finite_differences():
     M = Exp(np.r_[0.01, 0.25, 0.003, 0.02, -0.015, 0.4])

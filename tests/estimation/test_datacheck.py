@@ -20,6 +20,8 @@ from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 G1 = str(Path(__file__).resolve().parents[2] / "examples" / "unitree_g1.legmap.yaml")
+# The tests share the recordings `sessions` collects: one process runs them all.
+pytestmark = pytest.mark.xdist_group("datacheck")
 
 
 @pytest.fixture(scope="module")

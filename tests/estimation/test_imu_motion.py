@@ -18,6 +18,8 @@ from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.offsets import paper_injection
 
+pytestmark = pytest.mark.xdist_group("imu_motion")  # one process collects `weld` for all
+
 
 @pytest.fixture(scope="module")
 def weld(tmp_path_factory):

@@ -16,6 +16,8 @@ from legcal_bench.robots import load_robot
 from legcal_bench.sim.offsets import paper_base, resolve_offsets
 from legcal_bench.sim.sensors import SENSOR_PRESETS
 
+pytestmark = pytest.mark.xdist_group("imu_share")  # one process collects `sets` for all
+
 
 @pytest.fixture(scope="module")
 def sets(tmp_path_factory):

@@ -11,9 +11,9 @@ from legcal_bench.reports import regression
 FIXTURE = Path(__file__).resolve().parents[1] / "fixtures" / "regression.json"
 
 
-def test_the_code_reproduces_the_regression_fixture(tmp_path):
+def test_the_code_reproduces_the_regression_fixture(tmp_path, pool_workers):
     expected = regression.load_fixture(FIXTURE)
-    actual = regression.compute(tmp_path, workers=2)
+    actual = regression.compute(tmp_path, workers=pool_workers)  # 2, or 1 beside another test process
     assert len(actual["cells"]) == len(expected["cells"]) == 12
     assert len(actual["reproduce_zero_noise"]) == len(expected["reproduce_zero_noise"]) == 10
     problems = regression.compare(expected, actual)
