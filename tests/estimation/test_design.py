@@ -85,8 +85,11 @@ def test_hold_screen_passes_stance_one_and_fails_a_motion_the_robot_cannot_hold(
 
 
 def test_design_command_reports_default_and_designed(capsys):
-    assert main(["design", "--robot", "a2", "--candidates", "12", "--count", "2", "--contact-seeds", "1",
-                 "--weld-seeds", "1", "--json"]) == 0
+    # 400 frames for the 2 stances: every stance screened (the 4 default ones too) is
+    # simulated for 4 s in each case, as in the hold-screen test above (the default
+    # 2400 frames would simulate 24 s each).
+    assert main(["design", "--robot", "a2", "--candidates", "12", "--count", "2", "--frames", "400",
+                 "--contact-seeds", "1", "--weld-seeds", "1", "--json"]) == 0
     import json
 
     d = json.loads(capsys.readouterr().out)
