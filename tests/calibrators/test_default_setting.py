@@ -12,28 +12,24 @@ from legcal_bench.benchmark.suites import G1_EXAMPLE
 from legcal_bench.calibrators.base import calibrate_training
 from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
-from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 
 ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE)
 
 
-def _error_deg(robot, seed, tmp_path, **options) -> float:
-    out = tmp_path / f"{seed}"
-    if not out.is_dir():
-        collect(CollectConfig(robot=robot, mode="kinematic", sensors="zero", seed=seed, heldout=0), out,
-                progress=False)
+def _error_deg(robot, seed, collected, **options) -> float:
+    out = collected(robot=robot, mode="kinematic", sensors="zero", seed=seed, heldout=0)
     lm = load_robot(robot)
     res = calibrate_training(get_calibrator("interfoot", **options), lm, load_session(out, robot=lm))
     return float(np.rad2deg(np.abs(res.offsets_vector(lm.joint_names) - load_truth(list_segments(out)[0]).offsets).max()))
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_the_default_setting_recovers_zero_noise_offsets(robot, tmp_path):
-    errors = [_error_deg(robot, seed, tmp_path) for seed in range(3)]
+def test_the_default_setting_recovers_zero_noise_offsets(robot, collected):
+    errors = [_error_deg(robot, seed, collected) for seed in range(3)]
     assert max(errors) <= 1e-9, errors
 
 
-def test_the_papers_operating_setting_stays_available_and_is_biased_on_perfect_data(tmp_path):
+def test_the_papers_operating_setting_stays_available_and_is_biased_on_perfect_data(collected):
     assert get_calibrator("interfoot").setting == "sensor"
-    assert _error_deg("a3", 0, tmp_path, setting="operating") > 0.01
+    assert _error_deg("a3", 0, collected, setting="operating") > 0.01
