@@ -187,12 +187,7 @@ class DoubleSupportSim:
         """What the robot logs now: encoder angles, IMU specific force and rate (and
         ankle force/torque where the scene has them), with the sensor model's errors.
         Random draws, in order: IMU, encoders, force/torque."""
-        acc, gyro = self._true_imu()
-        acc, gyro = self.sensor.imu(acc, gyro, rng)
-        obs = {"q_enc": self.sensor.encoders(self._q_motor() - self.offsets, rng), "imu_acc": acc, "imu_gyro": gyro}
-        if self.has_ft:
-            obs["ft"] = self.sensor.force_torque(self.data.sensordata[self._ft_adr], rng)
-        return obs
+        return {k: v[0] for k, v in self._sense(self._snapshot(1), rng).items()}
 
     def truth(self) -> dict:
         """The ground truth now (never given to calibrators)."""
@@ -238,20 +233,15 @@ class DoubleSupportSim:
                 self.solve_postures(postures, self.true_kin)
         has_cmd = None if q_cmd is None else ~np.isnan(q_cmd).any(axis=1)
         has_true = None if q_true is None else ~np.isnan(q_true).any(axis=1)
-        obs = {"q_enc": np.empty((n, 12)), "imu_acc": np.empty((n, 3)), "imu_gyro": np.empty((n, 3))}
-        if self.has_ft:
-            obs["ft"] = np.empty((n, 2, 6))
         buf = self._buffers(n)
         for i in range(n):
             self._step(postures[i].copy(), q_cmd[i] if has_cmd is not None and has_cmd[i] else None,
                        q_true[i] if has_true is not None and has_true[i] else None,
                        R_WB[i] if kinematic else None)
-            for k, v in self.observe(rng).items():
-                obs[k][i] = v
             self._record(buf, i)
             if progress is not None:
                 progress.update(1)
-        return obs, self._truth(buf)
+        return self._sense(buf, rng), self._truth(buf)
 
     def render_scene(self, physics_dt: float) -> tuple[mujoco.MjModel, mujoco.MjData, np.ndarray]:
         """(model, data, pelvis position) posed for rendering; kinematic mode builds a
@@ -312,6 +302,13 @@ class DoubleSupportSim:
         """One physics step per row of `targets` (joint-space servo targets)."""
         sc, d, mj_step = self.scene, self.data, mujoco.mj_step
         m = sc.model
+        pos_act, pos_cols, motors = sc.servo
+        if pos_cols is None and motors is None:  # every leg joint on a position actuator, in order
+            ctrl = d.ctrl  # `apply_servos` of this layout, its lookups made once
+            for target in targets:
+                ctrl[pos_act] = target
+                mj_step(m, d)
+            return
         for target in targets:
             apply_servos(sc, d, target)
             mj_step(m, d)
@@ -361,6 +358,19 @@ class DoubleSupportSim:
         imu = self.data.sensordata[self._imu_adr]
         return imu[:3], imu[3:]
 
+    def _sense(self, buf: dict[str, np.ndarray], rng: np.random.Generator) -> dict[str, np.ndarray]:
+        """`observe` of every frame recorded in `buf` (`_record`), in one pass: the
+        random draws of all frames at once, each frame's in `observe`'s order (IMU 3 + 3,
+        encoders 12, force/torque 12), so the same numbers as frame by frame."""
+        n, sen = len(buf["time"]), self.sensor
+        noise = rng.standard_normal((n, 18 + (12 if self.has_ft else 0)))
+        imu = sen.imu_samples(np.stack([buf["imu_true_acc"], buf["imu_true_gyro"]], axis=1), noise[:, :6])
+        obs = {"q_enc": sen.encoders(buf["q_motor"] - self.offsets, rng, noise[:, 6:18]),
+               "imu_acc": np.ascontiguousarray(imu[:, 0]), "imu_gyro": np.ascontiguousarray(imu[:, 1])}
+        if self.has_ft:
+            obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, 18:].reshape(n, 2, 6))
+        return obs
+
     # ------------------------------------------------------------ ground truth
     # A frame's raw state goes into preallocated arrays (`_record`); `_truth` converts
     # any number of frames at once (poses to [x y z qw qx qy qz], sole drift).
@@ -372,6 +382,8 @@ class DoubleSupportSim:
         if self.mode != "kinematic":
             buf.update(sole_pos=np.empty((n, 2, 3)), sole_rot=np.empty((n, 2, 9)),
                        pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, 12)))
+        if self.has_ft:
+            buf["ft"] = np.empty((n, 2, 6))  # the ankle sensors' true wrenches
         return buf
 
     def _record(self, buf: dict[str, np.ndarray], i: int) -> None:
@@ -388,6 +400,8 @@ class DoubleSupportSim:
             buf["pelvis_pos"][i] = d.xpos[b]
             buf["pelvis_rot"][i] = d.xmat[b]
             buf["q_target"][i] = self._target
+        if self.has_ft:
+            buf["ft"][i] = self.data.sensordata[self._ft_adr]
 
     def _snapshot(self, n: int) -> dict[str, np.ndarray]:
         buf = self._buffers(n)
