@@ -46,7 +46,12 @@ def test_the_example_recovers_zero_noise_offsets_for_any_robot_it_is_given(dispe
         assert np.rad2deg(np.abs(est - truth).max()) < 1e-8, robot
 
 
-def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_loop(dispersion, tmp_path):
+def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_loop(dispersion, tmp_path,
+                                                                                  monkeypatch):
+    # The model-gap suite keeps its cases under the working directory (runs/bench/modelgap):
+    # here, so that every run computes them (never reuses an earlier run's) and parallel
+    # test processes share nothing.
+    monkeypatch.chdir(tmp_path)
     bags = tmp_path / "set"
     collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"),
                           stance_s=4.0, heldout=1, heldout_s=2.0, standing_s=1.0), bags, progress=False)
