@@ -50,8 +50,11 @@ def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_lo
                                                                                   monkeypatch):
     # The model-gap suite keeps its cases under the working directory (runs/bench/modelgap):
     # here, so that every run computes them (never reuses an earlier run's) and parallel
-    # test processes share nothing.
+    # test processes share nothing. Its cases record this test's short sessions.
+    from legcal_bench.benchmark import modelgap
+
     monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(modelgap, "COLLECT", {"stance_s": 4.0, "standing_s": 1.0})
     bags = tmp_path / "set"
     collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"),
                           stance_s=4.0, heldout=1, heldout_s=2.0, standing_s=1.0), bags, progress=False)
