@@ -22,14 +22,17 @@ seed-to-seed spread: a nominal walk with other sensor noise and initial jitter
 (`SPREAD_SEED_OFFSET`) against the trial's nominal walk. The leg-odometry check
 (`legcal_bench.evaluation.odometry`) runs on each nominal walk with the trial's offsets
 added to the logged encoders afterwards, before and after the trial's correction. Trials run through
-any `concurrent.futures.Executor` (local processes, or Dask's), one trial a task.
+any `concurrent.futures.Executor` (local processes, or Dask's), each trial's static estimate, walks
+and odometry a task of its own (the same numbers as one trial a task, `run_trial`).
 """
 
 from __future__ import annotations
 
 import tempfile
+import threading
 import time
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -73,20 +76,61 @@ def calibrator_options(name: str) -> dict:
 
 
 def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
-    """One trial: the static calibration, then the four walks."""
+    """One trial: the static calibration, then the four walks (and the spread walk, the
+    variants' corrected walks, the leg odometry), here, one after the other. `evaluate`
+    runs the same parts as separate tasks."""
+    static = static_estimate(cfg, seed)
+    walks = {c: trial_walk(cfg, seed, c, static["dq_hat"]) for c in (*WALKS, "spread") if c != "corrected"
+             or not static["failed"]}
+    walks.update({("variant", label): trial_walk(cfg, seed, "corrected", static["others"][label])
+                  for label, _, _ in cfg.variants if not static["failed"]})
+    return assemble_trial(cfg, seed, static, walks, trial_odometry_of(cfg, seed, walks["nominal"], static))
+
+
+WALKS = CONDITIONS  # a trial's walks besides the spread walk, in the order its row lists them
+_WALKERS = threading.local()  # per thread (a Dask worker runs tasks in threads): its walker, reused across trials
+
+
+def _walker(cfg: ClosedLoopConfig):
+    """(legmap, walking env, policy runner) of `cfg`, built once per thread and reused
+    by every walk (each `walk` resets the env and runner with its own seed), rebuilt if
+    the policy's or the robot's files changed."""
+    from legcal_bench.envs.walking import WalkingEnv
+    from legcal_bench.policies.runner import PolicyRunner
+    from legcal_bench.robots import load_robot
+
+    key = (cfg.robot, cfg.mjcf, cfg.policy, cfg.walk_sensors)
+    hit = getattr(_WALKERS, "cached", None)  # (key, file stamps, legmap, env, runner)
+    if hit is not None and hit[0] == key and hit[1] == _stamp(hit[2], hit[4]):
+        return hit[2:]
+    legmap = load_robot(cfg.robot, cfg.mjcf)
+    env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
+    runner = PolicyRunner(env.policy_spec, legmap)
+    _WALKERS.cached = (key, _stamp(legmap, runner), legmap, env, runner)
+    return legmap, env, runner
+
+
+def _stamp(legmap, runner) -> tuple:
+    """Modification times of the files a cached walker was built from."""
+    spec = runner.spec
+    files = (legmap.source, legmap.mjcf, spec.path, spec.model_file)
+    return tuple(Path(f).stat().st_mtime_ns if f is not None and Path(f).exists() else None for f in files)
+
+
+def static_estimate(cfg: ClosedLoopConfig, seed: int) -> dict:
+    """Step 1 of trial `seed`: its static session set collected and calibrated by the
+    method under test (and each variant); the estimate is frozen before any walking."""
     from legcal_bench.calibrators.base import calibrate_training
     from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import load_session
-    from legcal_bench.envs.walking import WalkingEnv
-    from legcal_bench.policies.runner import PolicyRunner
-    from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.errors import HoldError
+    from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
 
     legmap = load_robot(cfg.robot, cfg.mjcf)
     dq = trial_offsets(cfg.offsets, legmap, seed)
     t0 = time.perf_counter()
-    failed = None  # a static session set the robot could not hold: no estimate to walk with
+    failed, result, others = None, None, {}  # failed: a static session set the robot could not hold
     try:
         with tempfile.TemporaryDirectory() as tmp:
             collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
@@ -98,25 +142,48 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
                 legmap.joint_names) for label, name, opts in cfg.variants}
     except HoldError as e:
         failed = str(e)
-    dq_hat = None if failed else result.offsets_vector(legmap.joint_names)
-    static_s = time.perf_counter() - t0
-    env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
-    runner = PolicyRunner(env.policy_spec, legmap)
-    options = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, dq_hat),
-               "oracle": (dq, dq)}
-    walks = {c: walk(env, runner, cfg.seconds, seed, {"offsets": o, "correction": k}, log=c == "nominal")
-             for c, (o, k) in options.items() if not (failed and c == "corrected")}
-    spread = walk(env, runner, cfg.seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
+    return {"dq": dq, "dq_hat": None if failed else result.offsets_vector(legmap.joint_names), "others": others,
+            "failed": failed, "warnings": [] if failed else result.warnings, "static_s": time.perf_counter() - t0}
+
+
+def trial_walk(cfg: ClosedLoopConfig, seed: int, condition: str, estimate: np.ndarray | None = None):
+    """One walk of trial `seed`: `condition` one of `CONDITIONS` or "spread" (a nominal
+    walk with other noise and jitter); `estimate` the correction of a corrected walk.
+    Only the nominal walk keeps its logs (the odometry reads them)."""
+    legmap, env, runner = _walker(cfg)
+    dq = trial_offsets(cfg.offsets, legmap, seed)
+    offsets, correction = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, estimate),
+                           "oracle": (dq, dq), "spread": (np.zeros(12), None)}[condition]
+    return walk(env, runner, cfg.seconds, seed + (SPREAD_SEED_OFFSET if condition == "spread" else 0),
+                {"offsets": offsets, "correction": correction}, log=condition == "nominal")
+
+
+def trial_odometry_of(cfg: ClosedLoopConfig, seed: int, nominal, static: dict) -> dict | None:
+    """`trial_odometry` of trial `seed`'s nominal walk (None if its static set failed)."""
+    from legcal_bench.robots import load_robot
+
+    if static["failed"]:
+        return None
+    return trial_odometry(load_robot(cfg.robot, cfg.mjcf), nominal, static["dq"], static["dq_hat"])
+
+
+def assemble_trial(cfg: ClosedLoopConfig, seed: int, static: dict, walks: dict, odometry: dict | None) -> dict:
+    """The trial's row from its parts: `walks` condition -> Walk (and ("variant", label)
+    -> the variant's corrected walk)."""
+    failed, dq, dq_hat = static["failed"], static["dq"], static["dq_hat"]
     out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": None if failed else dq_hat.tolist(),
-           "recovery_rms_deg": None if failed else float(np.degrees(rms(dq_hat - dq))), "static_s": static_s,
-           "static_failed": failed, "calibration_warnings": [] if failed else result.warnings,
-           "privileged": runner.privileged}
-    for c, w in walks.items():
+           "recovery_rms_deg": None if failed else float(np.degrees(rms(dq_hat - dq))), "static_s": static["static_s"],
+           "static_failed": failed, "calibration_warnings": static["warnings"], "privileged": walks["nominal"].privileged}
+    nominal = walks["nominal"]
+    for c in WALKS:
+        if c not in walks:
+            continue
+        w = walks[c]
         row = {"upright": w.upright, "fallen_at": w.fallen_at, "torque_mean": w.torque_mean,
                "power_mean": w.power_mean, "wall_s": w.wall_s,
                "path": w.pelvis[::PATH_STEP, :2].round(4).tolist()}
-        if c != "nominal" and w.upright and walks["nominal"].upright:
-            row.update(deviation(w, walks["nominal"]))
+        if c != "nominal" and w.upright and nominal.upright:
+            row.update(deviation(w, nominal))
         out[c] = row
     if failed:
         out["corrected"] = {"skipped": failed}
@@ -125,15 +192,15 @@ def run_trial(cfg: ClosedLoopConfig, seed: int) -> dict:
         if failed:
             out["variants"][label] = {"skipped": failed}
             continue
-        est = others[label]
-        w = walk(env, runner, cfg.seconds, seed, {"offsets": dq, "correction": est})
+        est, w = static["others"][label], walks[("variant", label)]
         row = {"upright": w.upright, "fallen_at": w.fallen_at, "recovery_rms_deg": float(np.degrees(rms(est - dq)))}
-        if w.upright and walks["nominal"].upright:
-            row.update(deviation(w, walks["nominal"]))
+        if w.upright and nominal.upright:
+            row.update(deviation(w, nominal))
         out["variants"][label] = row
-    out["spread"] = deviation(spread, walks["nominal"]) if spread.upright and walks["nominal"].upright else {}
+    spread = walks["spread"]
+    out["spread"] = deviation(spread, nominal) if spread.upright and nominal.upright else {}
     out["spread"]["upright"] = spread.upright
-    out["odometry"] = None if failed else trial_odometry(legmap, walks["nominal"], dq, dq_hat)
+    out["odometry"] = odometry
     return out
 
 
@@ -204,26 +271,78 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
 
 
 def evaluate(cfg: ClosedLoopConfig, executor=None, progress: bool = True) -> tuple[dict, list[dict]]:
-    """All trials (through `executor` if given, else here), summarized."""
+    """All trials (through `executor` if given, else here), summarized. Through an
+    executor each trial's parts are tasks of their own (`trial_tasks`), so the workers
+    stay busy to the end; the numbers are those of `run_trial`."""
     from tqdm import tqdm
 
     seeds = range(cfg.first_seed, cfg.first_seed + cfg.trials)
-    bar = tqdm(total=cfg.trials, desc=f"walk-eval {cfg.offsets} {cfg.calibrator}", unit="trial", disable=not progress)
-    trials = []
+    desc = f"walk-eval {cfg.offsets} {cfg.calibrator}"
     if executor is None:
+        bar = tqdm(total=cfg.trials, desc=desc, unit="trial", disable=not progress)
+        trials = []
         for s in seeds:
             trials.append(run_trial(cfg, s))
             bar.update(1)
     else:
-        from concurrent.futures import as_completed
-
-        futures = [executor.submit(run_trial, cfg, s) for s in seeds]
-        for f in as_completed(futures):
-            trials.append(f.result())
-            bar.update(1)
+        bar = tqdm(total=cfg.trials * tasks_per_trial(cfg), desc=desc, unit="task", disable=not progress)
+        trials = list(trial_tasks(cfg, seeds, executor, bar))
     bar.close()
     trials.sort(key=lambda t: t["seed"])
     return summarize(cfg, trials), trials
+
+
+def tasks_per_trial(cfg: ClosedLoopConfig) -> int:
+    """Tasks of a trial through an executor: its static estimate, five walks (nominal,
+    uncorrected, corrected, oracle, spread), one per variant, its odometry."""
+    return 7 + len(cfg.variants)
+
+
+def trial_tasks(cfg: ClosedLoopConfig, seeds, executor, bar=None):
+    """Yield each trial's row as its last part finishes. Tasks: every static estimate
+    first (the corrected walks wait for them), then the walks that need no estimate
+    (nominal, uncorrected, oracle, spread); as an estimate arrives, its corrected walks;
+    once a trial's estimate and nominal walk are in, its odometry. `bar` (tqdm) counts
+    the tasks done (a failed static set's trial has fewer)."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    futures, parts = {}, {s: {} for s in seeds}
+
+    def submit(key, fn, *args):
+        futures[executor.submit(fn, cfg, *args)] = key
+
+    for s in seeds:
+        submit((s, "static"), static_estimate, s)
+    for s in seeds:
+        for c in ("nominal", "uncorrected", "oracle", "spread"):
+            submit((s, c), trial_walk, s, c)
+    while futures:
+        done, _ = wait(futures, return_when=FIRST_COMPLETED)
+        for f in done:
+            s, part = futures.pop(f)
+            got = parts[s]
+            got[part] = f.result()
+            static = got.get("static")
+            if bar is not None:
+                bar.update(1)
+                if part == "static" and static["failed"]:
+                    bar.total -= 2 + len(cfg.variants)  # no corrected walks, no odometry
+                    bar.refresh()
+            if part == "static" and not static["failed"]:
+                submit((s, "corrected"), trial_walk, s, "corrected", static["dq_hat"])
+                for label, _, _ in cfg.variants:
+                    submit((s, ("variant", label)), trial_walk, s, "corrected", static["others"][label])
+            if part in ("static", "nominal") and static is not None and "nominal" in got:
+                if static["failed"]:
+                    got["odometry"] = None
+                else:
+                    submit((s, "odometry"), trial_odometry_of, s, got["nominal"], static)
+            # parts: one per task, and the odometry's None where a failed static set has none
+            want = tasks_per_trial(cfg) - (1 + len(cfg.variants) if static is not None and static["failed"] else 0)
+            if len(got) == want:
+                walks = {k: v for k, v in got.items() if k not in ("static", "odometry")}
+                yield assemble_trial(cfg, s, got.pop("static"), walks, got.pop("odometry"))
+                del parts[s]
 
 
 def estimate_walks(robot, policy: str, true_dq: np.ndarray, estimates: dict, trials: int = 5,

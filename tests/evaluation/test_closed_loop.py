@@ -110,3 +110,48 @@ def test_a_trial_whose_static_set_cannot_be_held_walks_without_a_correction(monk
     assert s["conditions"]["corrected"]["trials"] == 0 and s["conditions"]["uncorrected"]["trials"] == 1
     write(tmp_path, [s], [[t]], "test", "test")
     assert "1 trial(s) without a calibration** (seeds [0])" in (tmp_path / "report.md").read_text()
+
+
+def test_trials_as_separate_tasks_give_the_rows_of_whole_trials():
+    """`evaluate` through an executor runs each trial's static estimate, walks and
+    odometry as tasks of their own (threads here: each keeps its own walker); the rows
+    are `run_trial`'s, number for number."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, evaluate, run_trial
+
+    cfg = ClosedLoopConfig(robot="a3", policy="a3", offsets="random:3", trials=2, seconds=1.0,
+                           options={"setting": "sensor"}, variants=(("zero", "zero", ()),))
+    with ThreadPoolExecutor(2) as ex:
+        summary, rows = evaluate(cfg, ex, progress=False)
+    timing = ("static_s", "wall_s")
+
+    def numbers(v):  # the row without its timings, NaN comparable
+        if isinstance(v, dict):
+            return {k: numbers(x) for k, x in v.items() if k not in timing}
+        if isinstance(v, list):
+            return [numbers(x) for x in v]
+        return "nan" if isinstance(v, float) and v != v else v
+
+    assert [numbers(r) for r in rows] == [numbers(run_trial(cfg, s)) for s in (0, 1)]
+    assert summary["variants"]["zero"]["trials"] == 2 and summary["odometry"]["after"]["total_mm"]["n"] == 2
+
+
+def test_a_trial_whose_static_set_failed_walks_without_a_correction_either_way(monkeypatch):
+    from concurrent.futures import ThreadPoolExecutor
+
+    from legcal_bench.evaluation import closed_loop
+    from legcal_bench.evaluation.walk import trial_offsets
+    from legcal_bench.robots import load_robot
+
+    cfg = closed_loop.ClosedLoopConfig(robot="a3", policy="a3", trials=2, seconds=0.5, variants=(("zero", "zero", ()),))
+    failed = lambda cfg, seed: {"dq": trial_offsets(cfg.offsets, load_robot("a3"), seed), "dq_hat": None,  # noqa: E731
+                                "others": {}, "failed": "did not hold", "warnings": [], "static_s": 0.0}
+    monkeypatch.setattr(closed_loop, "static_estimate", failed)
+    with ThreadPoolExecutor(2) as ex:
+        summary, rows = closed_loop.evaluate(cfg, ex, progress=False)
+    assert summary["static_failed"]["count"] == 2 and summary["conditions"]["corrected"]["trials"] == 0
+    alone = closed_loop.run_trial(cfg, 1)
+    assert rows[1]["corrected"] == alone["corrected"] == {"skipped": "did not hold"}
+    assert rows[1]["variants"] == alone["variants"] and rows[1]["odometry"] is alone["odometry"] is None
+    assert rows[1]["uncorrected"]["path"] == alone["uncorrected"]["path"]
