@@ -181,6 +181,10 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
     unknown = [g for g in groups if g not in GROUPS]
     if unknown:
         raise ConfigError(f"bench-speed --groups {' '.join(unknown)}: unknown; use any of {', '.join(GROUPS)}")
+    missing = [g for g in groups if not (HERE / GROUPS[g][0]).is_file()]
+    if missing:
+        raise ConfigError(f"bench-speed --groups {' '.join(missing)}: this checkout has no probe for it "
+                          f"({', '.join(GROUPS[g][0] for g in missing)} in {HERE}); leave it out")
     root = Path(__file__).resolve().parents[2]
     runs: dict[str, dict[str, list[dict]]] = {g: {"new": [], "old": []} for g in groups}
     with tempfile.TemporaryDirectory() as tmp:

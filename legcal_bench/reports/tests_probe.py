@@ -4,7 +4,7 @@ Run as a script (`python tests_probe.py --src DIR`), it runs `python -m pytest` 
 source tree DIR (a checkout of legcal-bench: its tests and its pytest settings, so an
 older commit's suite runs the way it ran then) with this process's environment
 (PYTHONPATH included, so `PYTHONPATH=<an older install> python tests_probe.py --src
-<its tree>` times that version) and prints one JSON object: the wall time, the count of
+<its tree>` times that version), in as many processes as that tree's `make test` uses, and prints one JSON object: the wall time, the count of
 tests passed and failed, and the slowest 20 (`--durations=20`). Standard library only.
 """
 
@@ -27,6 +27,14 @@ _DURATION = re.compile(r"^\s*([0-9.]+)s\s+(call|setup|teardown)\s+(\S+)")
 _COUNT = re.compile(r"(\d+) (passed|failed|errors?|skipped|deselected|xfailed|xpassed)")
 
 
+def workers(src: str) -> list[str]:
+    """The test command's own process count: `make test` runs `pytest -n $(TEST_WORKERS)`
+    (default 2) in a tree whose Makefile says so (since issue #36); before, one process."""
+    makefile = os.path.join(src, "Makefile")
+    text = open(makefile).read() if os.path.exists(makefile) else ""
+    return ["-n", os.environ.get("TEST_WORKERS", "2")] if "pytest -n $(TEST_WORKERS)" in text else []
+
+
 def run_suite(src: str) -> dict:
     """One run of the suite in `src`: wall seconds, counts by outcome, the slowest tests."""
     env = dict(os.environ)
@@ -34,7 +42,7 @@ def run_suite(src: str) -> dict:
         env["PYTHONPATH"] = os.pathsep.join(os.path.abspath(p) if p else p
                                             for p in env["PYTHONPATH"].split(os.pathsep))
     t0 = time.perf_counter()
-    done = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+    done = subprocess.run([sys.executable, "-m", "pytest", *workers(src), "-q", "-p", "no:cacheprovider",
                            f"--durations={SLOWEST}"], cwd=src, env=env, capture_output=True, text=True, check=False)
     wall = time.perf_counter() - t0
     lines = done.stdout.splitlines()

@@ -1,0 +1,44 @@
+"""bench-speed's summary: the ratio's direction, stage rows, targets, the offsets check
+(the probes themselves run in `legcal-bench bench-speed`, minutes a group)."""
+
+from __future__ import annotations
+
+import pytest
+
+from legcal_bench.reports.bench_speed import DEFAULT_GROUPS, GROUPS, HERE, summarize
+
+
+def _run(cases: dict) -> dict:
+    return {"cases": cases}
+
+
+def test_times_speed_up_as_old_over_new_and_rates_as_new_over_old():
+    runs = {"calibration": {
+        "old": [_run({"interfoot_end_to_end_sensor": {"unit": "s", "values": [2.0, 2.2, 1.8],
+                                                      "offsets": [0.0, 0.01],
+                                                      "stages": {"solve": [1.0, 1.0, 1.0], "gls": [0.0, 0.0, 0.0]}},
+                      "collect_weld_frames_per_s": {"unit": "frames/s", "values": [1000.0]}})],
+        "new": [_run({"interfoot_end_to_end_sensor": {"unit": "s", "values": [0.5, 0.4, 0.6],
+                                                      "offsets": [0.0, 0.01 + 1e-9],
+                                                      "stages": {"solve": [0.25, 0.25, 0.25], "gls": [0.1, 0.1, 0.1]}},
+                      "collect_weld_frames_per_s": {"unit": "frames/s", "values": [3000.0]}})]}}
+    rows, stages = summarize(runs)
+    by = {r["case"]: r for r in rows}
+    e2e = by["interfoot_end_to_end_sensor"]
+    assert (e2e["old"], e2e["new"], e2e["speedup"]) == (2.0, 0.5, 4.0)
+    assert e2e["target"] == "<= 0.15" and e2e["met"] is False
+    assert e2e["max_offset_difference_deg"] == pytest.approx(5.7295779513e-08)
+    assert by["collect_weld_frames_per_s"]["speedup"] == 3.0
+    st = {s["stage"]: s for s in stages}
+    assert st["solve"]["speedup"] == 4.0
+    assert st["gls"]["speedup"] is None  # the baseline did not run that stage
+
+
+def test_a_case_only_one_version_has_gets_no_ratio():
+    runs = {"startup": {"old": [], "new": [_run({"help": {"unit": "s", "values": [0.3, 0.2, 0.4]}})]}}
+    (row,), _ = summarize(runs)
+    assert row["old"] is None and row["speedup"] is None and row["new"] == 0.3 and row["met"] is True
+
+
+def test_the_default_groups_have_their_probe_scripts():
+    assert all((HERE / GROUPS[g][0]).is_file() for g in DEFAULT_GROUPS)
