@@ -37,6 +37,7 @@ def module_group(path: Path) -> str | None:
     return None
 
 
+@pytest.hookimpl(optionalhook=True)
 def pytest_xdist_make_scheduler(config, log):
     """`--dist loadgroup` as pytest-xdist documents it, for module-level marks: a module
     whose `pytestmark` names an `xdist_group` (it shares data its tests collect once, or
