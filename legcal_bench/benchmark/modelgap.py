@@ -122,9 +122,9 @@ def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: st
     from legcal_bench.robots import load_robot
 
     legmap = load_robot(robot)
-    cfg = CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed, heldout=HELDOUT,
-                        effects=tuple(specs), **({"stances": tuple(stances)} if stances else {}),
-                        **(collect_overrides or {}))
+    cfg = CollectConfig(**{"robot": robot, "mode": mode, "sensors": "calibrated-imu", "seed": seed, "heldout": HELDOUT,
+                           "effects": tuple(specs), **({"stances": tuple(stances)} if stances else {}),
+                           **(collect_overrides or {})})
     collect(cfg, work / "set", progress=False)
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 

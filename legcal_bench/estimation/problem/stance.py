@@ -319,6 +319,7 @@ class StanceProblem:
         self.means_at(x)
         for t in self.feet:
             t.mode = "projected"
+        self.problem.reset_cache()  # its last residual is the fixed-mean one, not this mode's
         return x, history
 
     def trim(self, dq: np.ndarray, fraction: float) -> None:
