@@ -3,6 +3,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from legcal_bench.reports.bench_speed import DEFAULT_GROUPS, GROUPS, HERE, summarize
@@ -42,3 +44,28 @@ def test_a_case_only_one_version_has_gets_no_ratio():
 
 def test_the_default_groups_have_their_probe_scripts():
     assert all((HERE / GROUPS[g][0]).is_file() for g in DEFAULT_GROUPS)
+
+
+def test_a_stopped_run_resumes_from_the_probe_runs_it_kept(tmp_path, monkeypatch):
+    from legcal_bench.reports import bench_speed
+
+    calls = []
+
+    def probe(group, repeats, pythonpath, data, robot, src):
+        calls.append(group)
+        if len(calls) == 2:
+            raise RuntimeError("the second probe run fails")
+        return _run({"help": {"unit": "s", "values": [0.1 * len(calls)]}})
+
+    monkeypatch.setattr(bench_speed, "run_probe", probe)
+    kwargs = dict(baseline="none", groups=("startup",), rounds=3, progress=False)
+    with pytest.raises(RuntimeError, match="second"):
+        bench_speed.run_bench_speed(tmp_path, **kwargs)
+    assert (tmp_path / bench_speed.PARTIAL_NAME).is_file() and len(calls) == 2
+    bench_speed.run_bench_speed(tmp_path, **kwargs)  # the first round's run is kept; two more
+    assert len(calls) == 4 and not (tmp_path / bench_speed.PARTIAL_NAME).exists()
+    kept = json.loads((tmp_path / "report.json").read_text())["runs"]["startup"]["new"]
+    assert [r["cases"]["help"]["values"] for r in kept] == [[0.1], [pytest.approx(0.3)], [pytest.approx(0.4)]]
+    calls.clear()
+    bench_speed.run_bench_speed(tmp_path, **{**kwargs, "rounds": 1})  # a finished run starts afresh
+    assert len(calls) == 1
