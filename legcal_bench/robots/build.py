@@ -18,7 +18,7 @@ from dm_control import mjcf
 
 from legcal_bench.files.atomic import atomic_write_text
 from legcal_bench.geometry.poses import from_wxyz, wxyz
-from legcal_bench.robots.design import DESIGNS, LEG_ROLES, ROLE_AXIS, LegDesign
+from legcal_bench.robots.design import DESIGNS, LEG_ROLES, LegDesign
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, Joint, Leg, LegMap
 
 ASSETS = Path(__file__).parent / "assets"
@@ -46,7 +46,10 @@ def _limits(design: LegDesign, role: str, side: str) -> tuple[float, float]:
     lo, hi = design.limits[role]
     # Roll and yaw limits mirror for the right leg (abduction stays positive outward).
     if side == "right" and role in ("hip_roll", "hip_yaw", "ankle_roll"):
-        return (-hi, -lo)
+        lo, hi = -hi, -lo
+    # A flipped axis turns the same way at the opposite angle.
+    if side == "right" and role in design.flipped_axes:
+        lo, hi = -hi, -lo
     return (lo, hi)
 
 
@@ -101,7 +104,7 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
             name = "foot" if role == "ankle_roll" else role
             body = parent.add("body", name=f"{side}_{name}_link", pos=list(_mirror(slot_pos[slot], side)))
             jname = f"{side}_{role}_joint"
-            body.add("joint", name=jname, axis=list(ROLE_AXIS[role]), range=list(_limits(design, role, side)))
+            body.add("joint", name=jname, axis=list(design.axis(role, side)), range=list(_limits(design, role, side)))
             joints.append(Joint(jname, role))
             servo = design.servos[role]
             m.actuator.add("position", name=f"{side}_{role}", joint=jname, kp=servo.kp, kv=servo.kv,

@@ -93,6 +93,25 @@ class LegDesign:
     knee_straight_rad: float = 0.0
     imu_pos: Vec3 = (-0.02, 0.0, 0.08)  # pelvis IMU, in the pelvis frame
     ft_pos: Vec3 = (0.0, 0.0, -0.03)  # ankle F/T sensor site, in the foot body
+    # Roles whose right-leg joint axis points the other way (-ROLE_AXIS; its limits
+    # negated with it): mirrored servos, as many small robots mount them. The same
+    # physical posture then has the opposite angle on that joint.
+    flipped_axes: tuple[str, ...] = ()
+    # Hip roll and yaw axes canted by this angle (rad) about the pelvis y axis, both
+    # legs: x -> (cos, 0, -sin), z -> (sin, 0, cos).
+    hip_cant: float = 0.0
+
+    def axis(self, role: str, side: str) -> Vec3:
+        """The joint axis of `role` on `side`, in its body's frame (= the pelvis frame
+        at zero angles)."""
+        import math
+
+        x, y, z = ROLE_AXIS[role]
+        if self.hip_cant and role in ("hip_roll", "hip_yaw"):
+            c, s = math.cos(self.hip_cant), math.sin(self.hip_cant)
+            x, z = c * x + s * z, -s * x + c * z
+        sign = -1.0 if side == "right" and role in self.flipped_axes else 1.0
+        return (round(sign * x, 12) + 0.0, round(sign * y, 12) + 0.0, round(sign * z, 12) + 0.0)
 
     def scaled(self, name: str, length: float, mass: float) -> "LegDesign":
         """The same design with every length times `length` and mass times `mass`."""

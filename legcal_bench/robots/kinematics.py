@@ -15,7 +15,7 @@ Two paths compute the same kinematics:
   extracts from the Pinocchio model when it is built (and checks against it).
 
 The pitch sum of a leg, s = dq_hip_pitch + dq_knee + dq_ankle_pitch (each signed by its
-axis direction), is what orientation alone observes of the parallel pitch chain
+axis direction against the pelvis y axis, one frame for both legs), is what orientation alone observes of the parallel pitch chain
 (`pitch_sums`).
 """
 
@@ -32,7 +32,7 @@ from scipy.optimize import least_squares
 from legcal_bench.errors import IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
-from legcal_bench.robots.design import PITCH_ROLES
+from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 
 
@@ -422,17 +422,31 @@ class LegKinematics:
             axes[i] = R_B.T @ J[3:, self.leg_v_idx[i]]
         return axes
 
+    def role_axes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(signs (12,), angles (12,) rad) of each leg joint's axis at zero angles against
+        its role's pelvis axis (`ROLE_AXIS`: pitch y, roll x, yaw z): +1 where they point
+        the same way, -1 where the axis points the other way (a joint mirrored by design:
+        a positive angle turns the leg the other way about the pelvis axis); the angle
+        between the axis and that axis's line (0 to pi/2; a canted axis has a few
+        degrees or tens of degrees)."""
+        axes = self.joint_axes()
+        ref = np.array([ROLE_AXIS[r] for r in self.legmap.joint_roles])
+        cos = np.einsum("ij,ij->i", axes, ref) / np.linalg.norm(axes, axis=1)
+        return np.where(cos < 0, -1.0, 1.0), np.arccos(np.clip(np.abs(cos), 0.0, 1.0))
+
+    def physical_signs(self) -> np.ndarray:
+        """(12,) +-1: each joint's angle sign against its role's pelvis axis
+        (`role_axes`). A role's offset times its sign is the same physical rotation on
+        every robot and on both legs, mirrored axes or not (the paper's presets)."""
+        return self.role_axes()[0]
+
     def pitch_signs(self) -> np.ndarray:
         """(12,) +-1 for hip pitch, knee and ankle pitch: each axis's direction relative to
-        its leg's common pitch axis (the knee's); 0 for the other joints."""
-        axes, roles = self.joint_axes(), self.legmap.joint_roles
-        signs = np.zeros(12)
-        for leg in (range(6), range(6, 12)):
-            knee = next(i for i in leg if roles[i] == "knee")
-            for i in leg:
-                if roles[i] in PITCH_ROLES:
-                    signs[i] = np.sign(axes[i] @ axes[knee])
-        return signs
+        the pelvis y axis, one frame for both legs (a common pitch of the pelvis, such as
+        an IMU tilt, moves both legs' pitch sums alike, mirrored axes or not); 0 for the
+        other joints."""
+        pitch = np.array([r in PITCH_ROLES for r in self.legmap.joint_roles])
+        return np.where(pitch, self.physical_signs(), 0.0)
 
     def sole_jacobian(self, side: str, q: np.ndarray) -> np.ndarray:
         """6x6 Jacobian of the sole pose in its own (local) frame w.r.t. that leg's joints."""
@@ -654,6 +668,26 @@ def solve_standing(kin: LegKinematics, T_W_left: pin.SE3, T_W_right: pin.SE3, po
     if np.linalg.norm(sol.fun) > 1e-10:
         raise IKError(f"no straight-leg standing posture for these sole placements (residual {np.linalg.norm(sol.fun):.1e})")
     return unpack(sol.x)
+
+
+# A joint's axis this far from its role's pelvis axis is reported (`axis_warnings`): the
+# role then names a motion the joint makes only in part (the G1's hip roll and yaw are
+# canted 10 degrees, well inside; at 45 degrees a hip axis is as much roll as yaw).
+ROLE_AXIS_WARN_RAD = math.radians(30.0)
+
+
+def axis_warnings(kin: LegKinematics) -> list[str]:
+    """A warning per leg joint whose axis is more than `ROLE_AXIS_WARN_RAD` from the
+    pelvis axis its role names (`LegKinematics.role_axes`)."""
+    _, angles = kin.role_axes()
+    axis_name = {(1.0, 0.0, 0.0): "x", (0.0, 1.0, 0.0): "y", (0.0, 0.0, 1.0): "z"}
+    out = []
+    for name, role, a in zip(kin.legmap.joint_names, kin.legmap.joint_roles, angles):
+        if a > ROLE_AXIS_WARN_RAD:
+            out.append(f"joint {name}: its axis is {math.degrees(a):.0f} deg from the pelvis "
+                       f"{axis_name[ROLE_AXIS[role]]} axis its role {role} names; the presets, pitch sums and "
+                       "observability read it by that role: check the leg map's role for it")
+    return out
 
 
 def pitch_sums(dq: np.ndarray, signs: np.ndarray) -> dict[str, float]:

@@ -18,14 +18,22 @@ PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | twelve
                 "(leg-map order)")
 
 
+def _physical_signs(legmap: LegMap) -> np.ndarray:
+    from legcal_bench.robots.kinematics import LegKinematics  # Pinocchio: not at import (command start-up)
+
+    return LegKinematics(legmap).physical_signs()
+
+
 def paper_injection(legmap: LegMap) -> np.ndarray:
-    """The paper's injection (rad) on this robot's 12 leg joints, by role."""
-    return np.array([INJECTION_RAD[r] for r in legmap.joint_roles])
+    """The paper's injection (rad) on this robot's 12 leg joints, by role, each signed by
+    its axis against the role's pelvis axis (`LegKinematics.physical_signs`): the same
+    physical pattern on every robot, a mirrored axis's joint included."""
+    return np.array([INJECTION_RAD[r] for r in legmap.joint_roles]) * _physical_signs(legmap)
 
 
 def paper_base(legmap: LegMap) -> np.ndarray:
     """The paper's real robots' base offsets (Table II, rad) on this robot, by role: the
-    A3's for a hip-pitch-first ordering, the A2's otherwise."""
+    A3's for a hip-pitch-first ordering, the A2's otherwise; signed as `paper_injection`."""
     if legmap.hip_order[0] == "hip_pitch":
         order, table = A3_PLATFORM_ORDER, A3_BASE_DEG
     else:
@@ -35,7 +43,7 @@ def paper_base(legmap: LegMap) -> np.ndarray:
     for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
         side = next(k for k, s in enumerate(sides) if name in [j.name for j in legmap.legs[s].joints])
         out[i] = np.deg2rad(table[6 * side + order.index(role)])
-    return out
+    return out * _physical_signs(legmap)
 
 
 def _degrees(spec: str, prefix: str, example: str) -> float:
