@@ -1,7 +1,9 @@
 """`legcal-bench robots-check`: robots as they come, measured.
 
-For the built-in robots, the G1 example and the generated test robots (every hip order,
-soft servos, narrow ankles; `legcal_bench.robots.design.GENERATED`), each through its
+For the built-in robots, the G1 example, the generated test robots (every hip order,
+soft servos, narrow ankles; `legcal_bench.robots.design.GENERATED`) and the variations
+third parties build (mirrored pitch servos, canted hips, a kid-size robot;
+`legcal_bench.robots.design.VARIATIONS`, no stiff twin), each through its
 leg map alone: the servo gains in use and their source, how much each stance had to
 shrink to fit, the hold check's largest excursions in weld and contact mode over the
 seeds (against its limits), and the weld-mode recovery of the default inter-foot
@@ -34,7 +36,7 @@ from legcal_bench.protocol.stances import STANCES, fit_stance
 from legcal_bench.provenance import code_version, describe
 from legcal_bench.robots import BUILTIN, available, load_robot, robot_label
 from legcal_bench.robots.build import write_robot
-from legcal_bench.robots.design import GENERATED, stiff_twin
+from legcal_bench.robots.design import GENERATED, VARIATIONS, stiff_twin
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.hold import HOLD_LIMITS
 
@@ -78,6 +80,7 @@ def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, ext
         for d in GENERATED:
             twin = str(write_robot(stiff_twin(d), tmp / "robots"))
             robots.append((str(write_robot(d, tmp / "robots")), twin))
+        robots += [(str(write_robot(d, tmp / "robots")), None) for d in VARIATIONS]
         bar = tqdm(total=len(robots) * seeds * 2 + sum(t is not None for _, t in robots) * seeds,
                    desc="robots-check", unit="set", disable=not progress)
         for robot, twin in robots:

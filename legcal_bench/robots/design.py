@@ -195,3 +195,13 @@ def stiff_twin(design: LegDesign, base: LegDesign = A3) -> LegDesign:
 # Six robots covering every hip order once and every (kp, ankle range) pair once.
 GENERATED: tuple[LegDesign, ...] = tuple(
     generated_design(order, GENERATED_KP[i % 3], GENERATED_ANKLE_DEG[i % 2]) for i, order in enumerate(HIP_ORDERS))
+
+
+# Robots as third parties build them (issue #37), each one change from A3-like: right-leg
+# pitch servos mounted mirrored; hip roll and yaw axes canted 45 degrees; a kid-size
+# robot (0.3 m legs, ~3 kg, servos scaled with it) with mirrored pitch servos.
+VARIATIONS: tuple[LegDesign, ...] = (
+    replace(A3, name="a3_mirrored_pitch", flipped_axes=PITCH_ROLES),
+    replace(A3, name="a3_canted_hips", hip_cant=0.7853981633974483),
+    replace(A3.scaled("kid_size", length=0.321, mass=0.055), flipped_axes=PITCH_ROLES),
+)

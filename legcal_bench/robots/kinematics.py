@@ -429,6 +429,11 @@ class LegKinematics:
         a positive angle turns the leg the other way about the pelvis axis); the angle
         between the axis and that axis's line (0 to pi/2; a canted axis has a few
         degrees or tens of degrees)."""
+        signs, angles = self._role_axes
+        return signs.copy(), angles.copy()
+
+    @cached_property
+    def _role_axes(self) -> tuple[np.ndarray, np.ndarray]:
         axes = self.joint_axes()
         ref = np.array([ROLE_AXIS[r] for r in self.legmap.joint_roles])
         cos = np.einsum("ij,ij->i", axes, ref) / np.linalg.norm(axes, axis=1)
@@ -545,11 +550,12 @@ class LegKinematics:
         return err_norm
 
     def q_init(self) -> np.ndarray:
-        """A mildly bent-knee seed in the middle of the joint ranges (IK starting point)."""
+        """A mildly bent-knee seed in the middle of the joint ranges (IK starting point):
+        the knee bent forward physically, a mirrored axis's angle signed accordingly."""
         q = np.clip(np.zeros(12), self.q_lower, self.q_upper)
-        roles = self.legmap.joint_roles
+        roles, signs = self.legmap.joint_roles, self._role_axes[0]
         for i, r in enumerate(roles):
-            bend = {"hip_pitch": -0.3, "knee": 0.6, "ankle_pitch": -0.3}.get(r, 0.0)
+            bend = signs[i] * {"hip_pitch": -0.3, "knee": 0.6, "ankle_pitch": -0.3}.get(r, 0.0)
             q[i] = np.clip(q[i] + bend, self.q_lower[i], self.q_upper[i])
         return q
 
