@@ -7,6 +7,7 @@ import json
 from dataclasses import asdict
 
 from legcal_bench.cli.robots import robot_args
+from legcal_bench.sim.names import EFFECTS_HELP, PRESETS_HELP, SENSOR_PRESET_NAMES
 
 
 def cmd_collect(a: argparse.Namespace) -> int:
@@ -29,17 +30,7 @@ def cmd_collect(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    sub.add_parser("collect", help="simulate static double-support recordings with known offsets",
-                   build=_collect_options)
-
-
-def _collect_options(c: argparse.ArgumentParser) -> None:
-    """On first use of `collect` only: the effect, preset and sensor names live in the
-    simulation modules (numpy, SciPy, Pinocchio)."""
-    from legcal_bench.sim.effects import EFFECTS_HELP
-    from legcal_bench.sim.offsets import PRESETS_HELP
-    from legcal_bench.sim.sensors import SENSOR_PRESETS
-
+    c = sub.add_parser("collect", help="simulate static double-support recordings with known offsets")
     robot_args(c)
     c.add_argument("--sim-model", default=None,
                    help="simulate this instead: an MJCF file (.xml; an edited copy of the robot's, same joint "
@@ -53,7 +44,7 @@ def _collect_options(c: argparse.ArgumentParser) -> None:
                    help="stances to record (default I II III IV; the optional load-varied push and press: feet "
                         "pushed against the floor, for compliance)")
     c.add_argument("--offsets", default="paper", help=f"injected offsets: {PRESETS_HELP} (default paper)")
-    c.add_argument("--sensors", default="realistic", choices=sorted(SENSOR_PRESETS), help="sensor model (default realistic)")
+    c.add_argument("--sensors", default="realistic", choices=sorted(SENSOR_PRESET_NAMES), help="sensor model (default realistic)")
     c.add_argument("--seed", type=int, default=0)
     c.add_argument("--heldout", type=int, default=3, help="held-out sessions (default 3)")
     c.add_argument("--rate", type=float, default=50.0, help="logging rate, Hz (default 50)")

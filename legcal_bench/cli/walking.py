@@ -8,6 +8,8 @@ import argparse
 import json
 
 from legcal_bench.cli.robots import robot_args
+from legcal_bench.evaluation.distill_config import DistillConfig
+from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
 
 
 def _correction(path, legmap):
@@ -155,7 +157,7 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
     from pathlib import Path
 
     from legcal_bench.errors import ConfigError
-    from legcal_bench.evaluation.distill import DistillConfig, export, train
+    from legcal_bench.evaluation.distill import export, train
     from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
     from legcal_bench.policies.spec import WALKERS_DIR
     from legcal_bench.policies.zmp_walker import TEACHERS_DIR, load_teacher_recipe
@@ -213,9 +215,9 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional "
-                                "correction: one walk, or paired trials against the nominal walk",
-                   build=_walk_options)
+    _walk_options(sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and "
+                                              "an optional correction: one walk, or paired trials against the "
+                                              "nominal walk"))
     e = sub.add_parser("walk-eval", help="the closed-loop evaluation: per trial a static calibration with the same "
                                          "offsets, then nominal, uncorrected, corrected and oracle walks")
     robot_args(e)
@@ -239,16 +241,13 @@ def add_commands(sub) -> None:
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_walk_eval)
 
-    sub.add_parser("train-policy", help="train our walking policy from scratch: the model-based teacher "
-                                        "(ZMP preview gait + IMU balance feedback) distilled into an MLP by "
-                                        "behaviour cloning and DAgger, checkpoint chosen by rollout success",
-                   build=_train_policy_options)
+    _train_policy_options(sub.add_parser("train-policy", help="train our walking policy from scratch: the "
+                                                              "model-based teacher (ZMP preview gait + IMU balance "
+                                                              "feedback) distilled into an MLP by behaviour cloning "
+                                                              "and DAgger, checkpoint chosen by rollout success"))
 
 
 def _walk_options(w: argparse.ArgumentParser) -> None:
-    """On first use of `walk` only: the offset presets live in the simulation (numpy, YAML)."""
-    from legcal_bench.sim.offsets import PRESETS_HELP
-
     robot_args(w)
     w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
                                                   "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2)")
@@ -261,7 +260,7 @@ def _walk_options(w: argparse.ArgumentParser) -> None:
     w.add_argument("--seconds", type=float, default=20.0)
     w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk)")
     w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets")
-    w.add_argument("--sensors", default="realistic", help="sensor preset: zero, realistic, calibrated-imu")
+    w.add_argument("--sensors", default="realistic", help=f"sensor preset: {', '.join(SENSOR_PRESET_NAMES)}")
     w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG)")
     w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames (default 2)")
     w.add_argument("--out", default=None, help="write the walk (or trials) as JSON")
@@ -270,16 +269,15 @@ def _walk_options(w: argparse.ArgumentParser) -> None:
 
 
 def _train_policy_options(t: argparse.ArgumentParser) -> None:
-    """On first use of `train-policy` only: its defaults live in the training module (the
-    simulation, Pinocchio)."""
-    from legcal_bench.evaluation.distill import DistillConfig
-
     robot_args(t)
     t.add_argument("--teacher", default=None, help="teacher recipe YAML (format legcal-teacher/1; default: "
                                                    "policies/teachers/<robot>.yaml for a built-in robot)")
-    t.add_argument("--iterations", type=int, default=7, help="DAgger iterations (the first is behaviour cloning)")
-    t.add_argument("--rollouts", type=int, default=16, help="20 s rollouts per iteration")
-    t.add_argument("--offsets-deg", type=float, default=3.0, help="training offsets: uniform +- this per joint")
+    t.add_argument("--iterations", type=int, default=DistillConfig.iterations,
+                   help="DAgger iterations (the first is behaviour cloning)")
+    t.add_argument("--rollouts", type=int, default=DistillConfig.rollouts,
+                   help=f"{DistillConfig.seconds:g} s rollouts per iteration")
+    t.add_argument("--offsets-deg", type=float, default=DistillConfig.offsets_deg,
+                   help="training offsets: uniform +- this per joint")
     t.add_argument("--selection-walks", type=int, default=DistillConfig.eval_rollouts,
                    help="random offset patterns (besides none and paper@3) the pure student walks after each "
                         f"iteration to choose the checkpoint (default {DistillConfig.eval_rollouts})")

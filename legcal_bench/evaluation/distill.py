@@ -32,6 +32,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.policies.observation import observation_size
 from legcal_bench.policies.runner import PolicyRunner
 from legcal_bench.policies.spec import ObsTerm, PolicySpec
@@ -39,25 +40,6 @@ from legcal_bench.policies.zmp_walker import TeacherRecipe, ZmpWalker
 
 TRAIN_SEED_BASE = 60000
 EVAL_SEED_BASE = 70000
-
-
-@dataclass(frozen=True)
-class DistillConfig:
-    iterations: int = 7
-    rollouts: int = 16  # per iteration
-    seconds: float = 20.0  # per rollout
-    offsets_deg: float = 3.0  # training offsets: uniform +- per joint
-    friction: tuple[float, float] = (0.7, 1.3)  # floor sliding friction range
-    mass_jitter: float = 0.05  # body masses x (1 +- this)
-    beta_decay: float = 0.5  # teacher share in DAgger iteration i: beta_decay ** i
-    hidden: tuple[int, ...] = (256, 128)
-    train_steps: int = 1500  # Adam steps per iteration
-    batch: int = 512
-    lr: float = 1e-3
-    action_scale: float = 0.25  # target = default_q + action_scale * action
-    eval_rollouts: int = 6  # random patterns in the selection set
-    eval_deg: float = 3.0  # the selection set's paper@<deg>
-    seed: int = 0
 
 
 def student_terms(recipe: TeacherRecipe) -> tuple[ObsTerm, ...]:

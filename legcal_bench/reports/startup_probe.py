@@ -85,8 +85,11 @@ def probe(repeats: int = 5, cases: dict[str, list[str]] | None = None) -> dict:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--repeats", type=int, default=5, help="timed runs per case (default 5)")
+    p.add_argument("--help-of", nargs="+", default=[], metavar="COMMAND",
+                   help="also time these commands' --help (e.g. collect walk train-policy)")
     a = p.parse_args(argv)
-    print(json.dumps(probe(a.repeats)))
+    cases = {**CASES, **{f"{c.replace('-', '_')}_help": [c, "--help"] for c in a.help_of}}
+    print(json.dumps(probe(a.repeats, cases)))
     return 0
 
 

@@ -53,6 +53,7 @@ from scipy.spatial.transform import Rotation
 from legcal_bench.errors import ConfigError
 from legcal_bench.geometry.poses import wxyz
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.sim.names import EFFECTS_HELP, KINDS
 from legcal_bench.sim.sensors import SimSensors
 
 COMPLIANCE_PREFIX = "legcal_compliance_"  # a passive series hinge after the motor joint it names
@@ -60,37 +61,6 @@ COMPLIANCE_DAMPING_RATIO = 0.7  # of the spring against the motor's armature
 MIN_ARMATURE = 0.01  # kg m^2, given to a motor joint without one (a rotor always has some)
 LINKS = ("thigh", "shank")
 ABOUT = ("x", "y", "z")
-
-
-@dataclass(frozen=True)
-class EffectKind:
-    name: str
-    keys: dict  # key -> (kind, default): kind "joint" | "link" | "side" | "about" | "stance" | "number"
-    help: str
-
-
-KINDS = {k.name: k for k in (
-    EffectKind("imu_tilt", {"roll": ("number", 0.0), "pitch": ("number", 0.0)}, "IMU mounting tilt (deg)"),
-    EffectKind("encoder_scale", {"joint": ("joint", None), "scale": ("number", None)},
-               "encoder scale error (fraction): the encoder reads (q - offset) / (1 + scale)"),
-    EffectKind("link_length", {"link": ("link", None), "mm": ("number", None)}, "link lengthened (mm)"),
-    EffectKind("hip_axis", {"joint": ("joint", None), "about": ("about", "z"), "deg": ("number", None)},
-               "joint axis rotated about its body's axis (deg)"),
-    EffectKind("joint_axis", {"joint": ("joint", None), "about": ("about", "z"), "deg": ("number", None)},
-               "any leg joint's axis rotated about its body's axis (deg)"),
-    EffectKind("link_offset", {"link": ("link", None), "axis": ("about", "y"), "mm": ("number", None)},
-               "link bent: its far joint moved across (mm, robot frame at the zero posture)"),
-    EffectKind("link_twist", {"link": ("link", None), "deg": ("number", None)},
-               "link twisted about its long axis (deg)"),
-    EffectKind("compliance", {"joint": ("joint", None), "k": ("number", None)},
-               "series spring between motor and link (N m/rad)"),
-    EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0),
-                        "stance": ("stance", None)},
-               "wedge under one sole (deg), in every session or only in one stance's (stance=NAME)"),
-    EffectKind("slope", {"roll": ("number", 0.0), "pitch": ("number", 0.0)}, "floor slope (deg)"),
-)}
-EFFECTS_HELP = ("NAME:key=value,... with NAME one of " + "; ".join(
-    f"{k.name} ({', '.join(k.keys)}: {k.help})" for k in KINDS.values()))
 
 
 @dataclass(frozen=True)

@@ -13,9 +13,7 @@ import numpy as np
 from legcal_bench.errors import OffsetSpecError
 from legcal_bench.paper import A2_BASE_DEG, A2_PLATFORM_ORDER, A3_BASE_DEG, A3_PLATFORM_ORDER, INJECTION_RAD
 from legcal_bench.robots.legmap import LegMap
-
-PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | twelve comma-separated radians "
-                "(leg-map order)")
+from legcal_bench.sim.names import PRESETS_HELP
 
 
 def _physical_signs(legmap: LegMap) -> np.ndarray:

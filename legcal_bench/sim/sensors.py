@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import SensorModelError
+from legcal_bench.sim.names import SENSOR_PRESET_NAMES
 
 G = 9.81  # m/s^2
 # Realized values that older recordings declared; a robot cannot know them.
@@ -185,12 +186,13 @@ class SimSensors:
 # noise, a MEMS IMU (about 1 mrad of gravity-direction noise per sample).
 _NOISE = dict(encoder_noise_std=1e-4, encoder_resolution=2 * np.pi / 2**17, accel_noise_std=0.01,
               gyro_noise_std=0.003, ft_force_noise_std=2.0, ft_torque_noise_std=0.2)
+ZERO, REALISTIC, CALIBRATED_IMU = SENSOR_PRESET_NAMES  # their names, which the command shows
 SENSOR_PRESETS: dict[str, SimSensors] = {
     # Every effect off: encoders read q_true - offset exactly, the IMU reads the truth.
-    "zero": SimSensors(),
+    ZERO: SimSensors(),
     # An uncalibrated IMU: a few mg of bias, mounted to within a tenth of a degree
     # (realized: 2.04 mrad of x bias over g plus 1.0 mrad of mounting pitch).
-    "realistic": SimSensors(
+    REALISTIC: SimSensors(
         SensorModel(**_NOISE, accel_bias_bound=0.03, gyro_bias_bound=0.002, imu_mount_bound=0.002),
         ImuErrors(accel_bias=(0.02, -0.015, 0.01), gyro_bias=(0.001, -0.0015, 0.0005),
                   imu_mount_rpy=(0.0015, -0.001, 0.0))),
@@ -199,7 +201,7 @@ SENSOR_PRESETS: dict[str, SimSensors] = {
     # the declared bound, z too: off level, a z bias b reads a tilt theta short by
     # (b/g) sin theta, so 1 mg of it scales the stances' pelvis pitch by -0.1 % and
     # biases a fitted encoder scale (issue #16; it was 0.01 m/s^2 before, 10x the bound).
-    "calibrated-imu": SimSensors(
+    CALIBRATED_IMU: SimSensors(
         SensorModel(**_NOISE, accel_bias_bound=0.001, gyro_bias_bound=0.002, imu_mount_bound=0.0001),
         ImuErrors(accel_bias=(0.0006, -0.0004, 0.0008), gyro_bias=(0.001, -0.0015, 0.0005),
                   imu_mount_rpy=(0.00005, -0.00004, 0.0))),

@@ -11,10 +11,6 @@ from legcal_bench.cli import build_parser
 
 HEAVY = ("torch", "mujoco", "dm_control", "pinocchio", "onnxruntime", "matplotlib", "scipy", "dask", "distributed",
          "gymnasium", "numpy")  # numpy too: a tenth of a second of the half-second start-up budget
-# Their options show a fact kept in a heavy module (the simulation's effect, offset and
-# sensor names; the training default; the speed baseline): they add their options on
-# first use, so only their own use pays.
-BUILT_ON_USE = ("collect", "walk", "train-policy")
 
 CHILD = r"""
 import contextlib, io, json, sys
@@ -62,25 +58,33 @@ def test_help_and_argument_errors_import_no_heavy_package():
     assert "expected one argument" in report["calibrate --calibrator"]["err"]
 
 
-def test_every_other_command_help_imports_no_heavy_package():
-    light = [c for c in commands() if c not in BUILT_ON_USE]
-    assert len(light) >= 15
-    report = start(*([c, "--help"] for c in light))
+def test_every_command_help_imports_no_heavy_package():
+    every = commands()
+    assert len(every) >= 18 and {"collect", "walk", "train-policy", "bench-speed"} <= set(every)
+    report = start(*([c, "--help"] for c in every))
     for case, r in report.items():
         assert r["loaded"] == [], f"{case}: {r['loaded']}"
         if case != "build_parser":
             assert r["exit"] == 0 and r["out"].startswith("usage: legcal-bench"), case
 
 
-def test_a_command_built_on_use_has_its_options_when_used(capsys):
-    """The deferred options are there for its help and its parsing, their defaults too."""
+def test_the_options_show_the_facts_of_the_modules_that_use_them(capsys):
+    """A fact an option shows (a preset name, a default) is the one the simulation or the
+    training uses: kept once, in a light module both import."""
     from legcal_bench.evaluation.distill import DistillConfig
     from legcal_bench.reports.bench_speed import BASELINE
+    from legcal_bench.sim.effects import EFFECTS_HELP
+    from legcal_bench.sim.offsets import PRESETS_HELP
+    from legcal_bench.sim.sensors import SENSOR_PRESETS
 
-    assert set(BUILT_ON_USE) <= set(commands())
     parser = build_parser()
     a = parser.parse_args(["train-policy"])
     assert a.selection_walks == DistillConfig.eval_rollouts and a.func.__name__ == "cmd_train_policy"
+    assert (a.iterations, a.rollouts, a.offsets_deg) == (DistillConfig.iterations, DistillConfig.rollouts,
+                                                         DistillConfig.offsets_deg)
+    collect = next(x for x in parser._subparsers._group_actions[0].choices["collect"]._actions
+                   if x.dest == "sensors")
+    assert sorted(collect.choices) == sorted(SENSOR_PRESETS)
     assert parser.parse_args(["bench-speed"]).baseline == BASELINE
     assert parser.parse_args(["collect", "--sensors", "zero"]).sensors == "zero"
     for command, shown in (("collect", "imu_tilt (roll, pitch: IMU mounting tilt (deg))"),
@@ -90,3 +94,11 @@ def test_a_command_built_on_use_has_its_options_when_used(capsys):
         except SystemExit:
             pass
         assert shown in " ".join(capsys.readouterr().out.split()), command
+    # Whole, compared without white space (help wraps lines at hyphens too).
+    for command, shown in (("collect", EFFECTS_HELP), ("collect", PRESETS_HELP), ("walk", PRESETS_HELP),
+                           ("walk", "sensor preset: " + ", ".join(SENSOR_PRESETS))):
+        try:
+            build_parser().parse_args([command, "--help"])
+        except SystemExit:
+            pass
+        assert "".join(shown.split()) in "".join(capsys.readouterr().out.split()), (command, shown)
