@@ -56,6 +56,8 @@ class CollectConfig:
     heldout_s: float = 10.0
     standing_s: float = 5.0
     knee_straight_error_rad: float = 0.005
+    # Placement jitter: the largest sole shift (m, for an A3-sized leg; scaled down for a
+    # shorter one, `legcal_bench.protocol.stances.jitter_scale`) and yaw (rad).
     jitter_m: float = 0.015
     jitter_rad: float = 0.05
     heldout_jitter_m: float = 0.04

@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from legcal_bench.errors import ConfigError
+from legcal_bench.errors import ConfigError, IKError
 from legcal_bench.protocol.collect import CollectConfig, record_segment
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import ALL_STANCES, Stance
@@ -48,16 +48,19 @@ class ScreenReport:
 
     stance: str
     reports: dict  # mode -> HoldReport (worst pelvis / sole excursion over the cases; up to the first failure)
+    unreachable: str | None = None  # why the stance could not be recorded on this robot at all (rejected)
 
     @property
     def held(self) -> bool:
-        return all(r.held for r in self.reports.values())
+        return self.unreachable is None and all(r.held for r in self.reports.values())
 
     def failures(self) -> list[str]:
-        return [f"{mode}: {f}" for mode, r in self.reports.items() for f in r.failures()]
+        return ([f"unreachable: {self.unreachable}"] if self.unreachable else []) + [
+            f"{mode}: {f}" for mode, r in self.reports.items() for f in r.failures()]
 
     def to_dict(self) -> dict:
         return {"stance": self.stance, "held": self.held,
+                **({"unreachable": self.unreachable} if self.unreachable else {}),
                 **{mode: r.to_dict() for mode, r in self.reports.items()}}
 
 
@@ -97,14 +100,20 @@ class HoldScreen:
                 f"with the pelvis within {self.margin:g} of its limit")
 
     def __call__(self, stance: Stance) -> ScreenReport:
-        """The stance's worst excursions; a stance stops being simulated once it fails."""
+        """The stance's worst excursions; a stance stops being simulated once it fails,
+        and one the robot cannot take at all (its placement or posture motion out of
+        reach) is rejected with the reason."""
         catalog = {**ALL_STANCES, stance.name: stance}
         reports = {}
         for mode in self.modes:
             worst, limits = None, self.limits[mode]
             for case in self.cases[mode]:
                 sim = self.sims[mode, case]
-                seg = record_segment(sim, stance.name, self.duration_s, abs(case), *self.jitter, catalog=catalog)
+                try:
+                    seg = record_segment(sim, stance.name, self.duration_s, abs(case), *self.jitter,
+                                         catalog=catalog)
+                except IKError as e:
+                    return ScreenReport(stance.name, reports, unreachable=f"{mode} case {case}: {e}")
                 r = HoldReport.from_truth(seg.truth, sim.true_kin.dims.leg_length, limits)
                 worst = r if worst is None else HoldReport(
                     max(worst.pelvis_m, r.pelvis_m), r.pelvis_limit_m,

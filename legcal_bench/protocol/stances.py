@@ -178,10 +178,24 @@ class Placement:
     nominal: np.ndarray  # posture [x, y, z, roll, pitch, yaw]
 
 
+# Placement jitter in metres (`CollectConfig.jitter_m`, `heldout_jitter_m`) is written for
+# a leg as long as the A3-like robot's (this, its `RobotDims.leg_length`); a shorter leg gets
+# it scaled by its length (a 0.3 m leg a third of it), a longer one as written (the
+# built-ins are all at least this long: their data do not change).
+JITTER_REFERENCE_LEG_M = 0.935
+
+
+def jitter_scale(dims: RobotDims) -> float:
+    """The factor on a placement jitter in metres for a robot of `dims`."""
+    return min(1.0, dims.leg_length / JITTER_REFERENCE_LEG_M)
+
+
 def place(stance: Stance, dims: RobotDims, rng: np.random.Generator | None = None,
           jitter_m: float = 0.0, jitter_rad: float = 0.0) -> Placement:
-    """Sole poses for `stance`, each perturbed uniformly by up to the jitter."""
+    """Sole poses for `stance`, each perturbed uniformly by up to the jitter (`jitter_m`
+    for an A3-sized leg, `jitter_scale`)."""
     L = dims.leg_length
+    jitter_m = jitter_m * jitter_scale(dims)
     y = dims.foot_y + stance.extra_width * L
     feet = []
     for sx, sy, yaw in ((stance.left_x, y, stance.toe_out), (stance.right_x, -y, -stance.toe_out)):

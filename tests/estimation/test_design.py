@@ -149,3 +149,23 @@ def test_excite_learns_on_the_env_reward_and_reports_the_three_motions(tmp_path,
     assert d["still"]["factors"] == [0.0] * 6 and len(d["history"]) == 2 and "commit" in d["code"]
     assert main(["excite", "--robot", "a2", "--population", "2", "--elite", "2"]) == 2
     assert "--elite 2" in capsys.readouterr().err
+
+
+def test_the_screen_rejects_a_stance_out_of_reach_and_design_goes_on_within_its_budget():
+    from dataclasses import replace
+
+    import pytest
+
+    from legcal_bench.errors import ConfigError
+    from legcal_bench.estimation.information.design import design
+    from legcal_bench.protocol.screen import HoldScreen
+
+    screen = HoldScreen(load_robot("a2"), "random:1.2", contact_seeds=1, weld_seeds=1, duration_s=2.0)
+    far = replace(STANCES["II"], name="far", left_x=3.0, right_x=-3.0)  # soles three leg lengths apart
+    report = screen(far)
+    assert not report.held and report.unreachable and "does not fit this robot" in report.unreachable
+    assert report.failures()[0].startswith("unreachable: ") and report.to_dict()["unreachable"]
+    # A design out of time says how far it got instead of running on (a screen that takes no time).
+    kin = LegKinematics(load_robot("a3"))
+    with pytest.raises(ConfigError, match=r"time budget of 0 s ran out after the hold screen of 0 of \d+ fitting"):
+        design(kin, list(STANCES.values()), k=2, candidates=4, frames=400, screen=lambda s: None, budget_s=0)

@@ -38,3 +38,14 @@ def test_zero_noise_kinematic_recovery_on_each_variation(design, tmp_path):
     error = res.offsets_vector(lm.joint_names) - resolve_offsets("paper", lm)
     assert np.degrees(np.abs(error)).max() <= 1e-9
     assert res.warnings == []
+
+
+def test_placement_jitter_is_written_for_the_a3_like_leg_and_scales_below_it(tmp_path):
+    from legcal_bench.protocol.stances import JITTER_REFERENCE_LEG_M, jitter_scale
+
+    dims = {r: LegKinematics(load_robot(r)).dims for r in ("a3", "a2", "pair_ryp", "pair_pry")}
+    assert JITTER_REFERENCE_LEG_M == dims["a3"].leg_length
+    assert all(jitter_scale(d) == 1.0 for d in dims.values())  # the built-ins' placements as they were
+    kid = LegKinematics(load_robot(str(write_robot(VARIATIONS[2], tmp_path)))).dims
+    assert jitter_scale(kid) == pytest.approx(kid.leg_length / dims["a3"].leg_length) and jitter_scale(kid) < 0.33
+

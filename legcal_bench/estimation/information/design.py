@@ -22,6 +22,7 @@ recovery over seeds comes with the collected protocol (`bench --protocol`).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable
 
@@ -148,13 +149,21 @@ def summary(kin: LegKinematics, H: np.ndarray) -> dict:
             "pitch_sum_std_deg": ps}
 
 
+class _OutOfTime(Exception):
+    pass
+
+
 def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: int = 60, frames: int = 2400,
            seed: int = 0, sensors: str = "realistic", ranges: str = "default",
-           screen: Callable[[Stance], object] | None = None, progress: bool = False) -> dict:
+           screen: Callable[[Stance], object] | None = None, progress: bool = False,
+           budget_s: float | None = None) -> dict:
     """The default protocol against `k` stances chosen from `candidates` sampled ones,
     at the same total frame count; candidates that do not fit the robot are skipped,
     and with `screen` (stance -> a report with `.held` and `.to_dict()`, e.g.
-    `HoldScreen`) those the robot does not hold."""
+    `HoldScreen`) those the robot does not hold or cannot take (rejected, the search
+    goes on). With `budget_s`, no stance is screened after that many seconds: the
+    design then stops with a ConfigError saying how far it got."""
+    t0 = time.monotonic()
     rng = np.random.default_rng(seed)
     default_info = [stance_information(kin, s, frames // len(default), seed=seed, sensors=sensors) for s in default]
     pool = []
@@ -166,13 +175,24 @@ def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: in
     screened: dict[str, dict] = {}
 
     def accept(j: int) -> bool:
+        if budget_s is not None and time.monotonic() - t0 > budget_s:
+            raise _OutOfTime
         report = screen(pool[j].stance)
         screened[pool[j].stance.name] = report.to_dict()
         if progress:
-            tqdm.write(f"  hold screen {pool[j].stance.name}: {'held' if report.held else 'failed'}")
+            verdict = "held" if report.held else ("unreachable" if getattr(report, "unreachable", None) else "failed")
+            tqdm.write(f"  hold screen {pool[j].stance.name}: {verdict}")
         return report.held
 
-    chosen = [pool[j] for j in greedy_design(pool, k, accept if screen is not None else None)]
+    try:
+        chosen = [pool[j] for j in greedy_design(pool, k, accept if screen is not None else None)]
+    except _OutOfTime:
+        held = sum(r["held"] for r in screened.values())
+        raise ConfigError(
+            f"stance design: the time budget of {budget_s:g} s ran out after the hold screen of {len(screened)} "
+            f"of {len(pool)} fitting candidates ({held} held, {k} asked for); give more time (--budget), fewer "
+            "screen cases (--weld-seeds, --contact-seeds), or choose from the kinematics alone (--no-screen)"
+        ) from None
     # The default stances through the same screen, for comparison (never rejected).
     default_screen = {s.name: screen(s).to_dict() for s in default} if screen is not None else {}
     return {"default_screen": default_screen,"default": summary(kin, sum(s.H for s in default_info)),
