@@ -8,6 +8,7 @@ import json
 import pytest
 
 from legcal_bench.benchmark import modelgap as mg
+from legcal_bench.provenance import RESULTS_VERSION
 
 CODE = {"package": "0.1.0", "commit": "c0ffee", "results_version": 7}
 
@@ -50,7 +51,7 @@ def test_a_rerun_computes_only_the_cases_missing_broken_or_stale(tmp_path, fake_
     assert len(files) == 7 and not list(tmp_path.rglob("*.tmp"))
     case = json.loads(mg.case_path(tmp_path, ("a3", "library", "hip_axis", 0, None, mg.DEFAULT_CALIBRATOR)).read_text())
     assert case["case"]["kind"] == "library" and case["case"]["name"] == "hip_axis" and case["case"]["seed"] == 0
-    assert case["case"]["calibrator"]["name"] == "interfoot" and case["provenance"]["code"]["results_version"] == 7
+    assert case["case"]["calibrator"]["name"] == "interfoot" and case["provenance"]["code"]["results_version"] == RESULTS_VERSION
     assert "cases=['clean', 'library']" in case["provenance"]["command"]
     # The same command again: every case kept, the report the same.
     calls.clear()
