@@ -213,3 +213,22 @@ def test_check_command_prints_what_each_check_measures(sessions, tmp_path, capsy
     assert main(["check", "--robot", "a3", "--bags", str(out), "--result", str(res)]) == 0
     text = capsys.readouterr().out
     assert "disp mm" in text and "limits: identical run 10 frames" in text and "no data warnings" in text
+
+
+def test_without_an_estimate_the_checks_judge_at_profiled_offsets_and_raise_no_false_alarm(tmp_path):
+    """Clean data with +-3 deg offsets: judged on the raw encoders alone, the soles look
+    off one plane (tens of mm); at the profiled offsets nothing is flagged."""
+    from legcal_bench.estimation.checks.profile import profiled_offsets
+
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="kinematic", offsets="random:3", seed=0, heldout=0), tmp_path,
+            progress=False)
+    recs = load_session(tmp_path, lm.joint_names)
+    kin = LegKinematics(lm)
+    assert any("not on one plane" in w for w in data_warnings(kin, recs))
+    dq, note = profiled_offsets(lm, recs)
+    assert note.startswith("offsets profiled out") and data_warnings(kin, recs, dq) == []
+    truth = np.load(tmp_path / "stance_I.truth.npz")["offsets"]
+    assert np.degrees(np.abs(dq - truth)).max() < 0.5  # realistic sensors: the IMU tilt's share, not the offsets
+    none, why = profiled_offsets(lm, [r for r in recs if r.kind == "standing"])
+    assert none is None and "not profiled out" in why and "--result" in why
