@@ -91,7 +91,7 @@ def load_robot(spec: str | Path, mjcf: str | Path | None = None) -> LegMap:
         path = Path(mjcf).resolve()
         if not path.is_file():
             raise MissingModelError(f"--mjcf {path} does not exist")
-        legmap = replace(legmap, mjcf=path)
+        legmap = replace(legmap, mjcf=path, urdf=None)  # that MJCF is the model, for Pinocchio too
     return legmap
 
 

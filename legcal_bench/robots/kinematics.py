@@ -107,9 +107,12 @@ class LegKinematics:
     def __init__(self, legmap: LegMap):
         self.legmap = legmap
         try:
-            self.model = pin.buildModelFromMJCF(str(legmap.mjcf))
+            if legmap.urdf is not None:  # the URDF's root link as the floating base
+                self.model = pin.buildModelFromUrdf(str(legmap.urdf), pin.JointModelFreeFlyer())
+            else:
+                self.model = pin.buildModelFromMJCF(str(legmap.mjcf))
         except Exception as e:  # noqa: BLE001 - Pinocchio raises bare RuntimeErrors
-            raise LegMapError(f"Pinocchio could not load {legmap.mjcf}: {e}") from None
+            raise LegMapError(f"Pinocchio could not load {legmap.model_file}: {e}") from None
         m = self.model
         self.q_neutral = pin.neutral(m)
         self.leg_q_idx = np.empty(12, dtype=int)
@@ -117,7 +120,7 @@ class LegKinematics:
         self.leg_joint_ids = np.empty(12, dtype=int)
         for i, name in enumerate(legmap.joint_names):
             if not m.existJointName(name):
-                raise LegMapError(f"{legmap.source}: leg joint '{name}' is not in {legmap.mjcf}")
+                raise LegMapError(f"{legmap.source}: leg joint '{name}' is not in {legmap.model_file}")
             j = m.joints[m.getJointId(name)]
             if j.nq != 1 or j.nv != 1:
                 raise LegMapError(f"{legmap.source}: leg joint '{name}' is not a 1-DoF joint")
@@ -125,7 +128,7 @@ class LegKinematics:
             self.leg_joint_ids[i] = m.getJointId(name)
         for name, angle in legmap.held_joints_rad.items():
             if not m.existJointName(name):
-                raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.mjcf}")
+                raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.model_file}")
             self.q_neutral[m.joints[m.getJointId(name)].idx_q] = angle
         self.pelvis_frame = self._frame_id(legmap.pelvis, "body", "pelvis")
         self.sole_frame = {s: self._add_frame(f"legcal_{s}_sole", legmap.legs[s].sole, f"legs.{s}.sole")
@@ -162,11 +165,11 @@ class LegKinematics:
             others = sorted({str(f.type).split(".")[-1] for f in m.frames if f.name == name})
             also = f" (only a frame of type {', '.join(others)} has that name)" if others else ""
             raise LegMapError(f"{self.legmap.source}: {field} names {kind} '{name}', which is not a {kind} in "
-                              f"{self.legmap.mjcf}{also}; give the name of a {kind} (or write {field}: "
+                              f"{self.legmap.model_file}{also}; give the name of a {kind} (or write {field}: "
                               f"{{{'body' if kind == 'site' else 'site'}: ...}})")
         if len(matches) > 1:
             raise LegMapError(f"{self.legmap.source}: {field} names {kind} '{name}', which matches {len(matches)} "
-                              f"{kind}s in {self.legmap.mjcf}; rename one of them in the MJCF")
+                              f"{kind}s in {self.legmap.model_file}; rename one of them in the model file")
         return matches[0]
 
     def _add_frame(self, name: str, spec: FrameSpec, where: str) -> int:

@@ -1,4 +1,4 @@
-"""The leg map: what legcal-bench needs to know about any robot beyond its MJCF.
+"""The leg map: what legcal-bench needs to know about any robot beyond its MJCF or URDF.
 
 A small YAML file names the 12 leg joints (left leg then right, each from pelvis to
 foot) with their roles, the sole frames and their four corner points, the pelvis and
@@ -73,6 +73,14 @@ class LegMap:
     # Only for MJCFs whose leg actuators are torque motors: joint -> (kp, kd).
     servo_gains: dict[str, tuple[float, float]] = field(default_factory=dict)
     source: Path | None = None
+    # A robot described by a URDF: Pinocchio reads this; `mjcf` is then MuJoCo's
+    # compilation of it (`legcal_bench.robots.urdf`).
+    urdf: Path | None = None
+
+    @property
+    def model_file(self) -> Path:
+        """The robot's own description: its URDF, else its MJCF."""
+        return self.urdf if self.urdf is not None else self.mjcf
 
     @property
     def joint_names(self) -> list[str]:
@@ -87,13 +95,14 @@ class LegMap:
         return self.legs["left"].hip_order
 
     def to_dict(self, mjcf_relative_to: Path | None = None) -> dict:
-        mjcf = self.mjcf
+        key = "mjcf" if self.urdf is None else "urdf"
+        model = self.model_file
         if mjcf_relative_to is not None:
-            mjcf = Path(_relpath(self.mjcf, mjcf_relative_to))
+            model = Path(_relpath(model, mjcf_relative_to))
         d: dict = {
             "schema": SCHEMA,
             "name": self.name,
-            "mjcf": str(mjcf),
+            key: str(model),
             "pelvis": self.pelvis,
             "imu": self.imu.to_dict(),
             "knee_straight_rad": self.knee_straight_rad,
@@ -158,20 +167,24 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         raise LegMapError(f"{where}: expected a YAML mapping at the top level")
     if data.get("schema") != SCHEMA:
         raise LegMapError(f"{where}: field 'schema' must be '{SCHEMA}' (got {data.get('schema')!r})")
-    for key in ("name", "mjcf", "pelvis", "imu", "legs"):
+    for key in ("name", "pelvis", "imu", "legs"):
         if key not in data:
             raise LegMapError(f"{where}: missing field '{key}' (see docs/leg-map.md)")
+    if ("mjcf" in data) == ("urdf" in data):
+        raise LegMapError(f"{where}: give the robot's model in exactly one of the fields 'mjcf' (an MJCF file) "
+                          "or 'urdf' (a URDF file)" + (", not both" if "mjcf" in data else ""))
     unknown = set(data) - {
-        "schema", "name", "mjcf", "pelvis", "imu", "legs", "knee_straight_rad",
+        "schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad",
         "held_joints_rad", "servo_gains",
     }
     if unknown:
         raise LegMapError(f"{where}: unknown fields {sorted(unknown)} (see docs/leg-map.md)")
-    mjcf = Path(data["mjcf"])
-    if not mjcf.is_absolute():
-        mjcf = (base_dir / mjcf).resolve()
-    if not mjcf.is_file():
-        raise MissingModelError(f"{where}: field 'mjcf' points to {mjcf}, which does not exist; "
+    kind = "mjcf" if "mjcf" in data else "urdf"
+    model = Path(data[kind])
+    if not model.is_absolute():
+        model = (base_dir / model).resolve()
+    if not model.is_file():
+        raise MissingModelError(f"{where}: field '{kind}' points to {model}, which does not exist; "
                                 "give a path relative to the leg map or an absolute path")
     legs_d = data["legs"]
     if not isinstance(legs_d, dict) or set(legs_d) != set(SIDES):
@@ -225,9 +238,21 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
     for k in gains:
         if k not in names:
             raise LegMapError(f"{where}: servo_gains.{k} is not one of the 12 leg joints")
+    urdf = None
+    if kind == "urdf":
+        sites = [f for f, spec in [("imu", data["imu"])] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES
+                                                             for k in ("sole", "ft")]
+                 if isinstance(spec, dict) and "site" in spec]
+        if sites:
+            raise LegMapError(f"{where}: {', '.join(sites)}: a URDF has no sites; give each frame as a pose relative "
+                              "to a link, {body: <link>, pos: [x, y, z], rpy: [r, p, y]}")
+        from legcal_bench.robots.urdf import mjcf_of_urdf
+
+        urdf, model = model, mjcf_of_urdf(model, where)
     return LegMap(
         name=str(data["name"]),
-        mjcf=mjcf,
+        mjcf=model,
+        urdf=urdf,
         pelvis=str(data["pelvis"]),
         legs=legs,
         imu=_frame(data["imu"], f"{where}: imu"),
