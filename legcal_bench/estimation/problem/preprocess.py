@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.cluster.vq import kmeans2
+from scipy.spatial import cKDTree
 
 from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S, compensate
 from legcal_bench.geometry.lie import Exp, Log, frechet_mean, inverse
@@ -183,10 +184,17 @@ def _cluster(Q: np.ndarray, n_max: int) -> np.ndarray:
     if len(Q) <= n_max:
         return np.arange(len(Q))
     centroids, _ = kmeans2(Q, n_max, seed=0, minit="points")
-    # Per centroid, the nearest frame (the first on a tie), in blocks of centroids that
-    # keep the (frames, block, 12) differences in cache.
-    nearest = np.empty(len(centroids), dtype=np.intp)
-    for a in range(0, len(centroids), 64):
-        d2 = ((Q[:, None, :] - centroids[None, a:a + 64]) ** 2).sum(-1)
-        nearest[a:a + 64] = np.argmin(d2, axis=0)
-    return np.unique(nearest)
+    return np.unique(nearest_rows(Q, centroids))
+
+
+def nearest_rows(Q: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """For each of `points`, the index of the nearest row of `Q` (the first on a tie of
+    the squared distance sum((q - p)^2)): a k-d tree finds the candidates, every row
+    within 1e-9 relative of its distance (duplicate frames, ties) is compared exactly."""
+    tree = cKDTree(Q)
+    dist, nearest = tree.query(points)
+    for i, ball in enumerate(tree.query_ball_point(points, dist * (1 + 1e-9))):
+        if len(ball) > 1:
+            ball = np.sort(ball)
+            nearest[i] = ball[np.argmin(((Q[ball] - points[i]) ** 2).sum(-1))]
+    return nearest
