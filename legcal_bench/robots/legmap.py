@@ -197,9 +197,15 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
             if key not in ld:
                 raise LegMapError(f"{lw}: missing field '{key}'")
         joints_d = ld["joints"]
-        if not isinstance(joints_d, list) or len(joints_d) != 6:
+        if not isinstance(joints_d, list):
             raise LegMapError(f"{lw}.joints: list the leg's 6 joints from pelvis to foot, "
                               f"each as {{name: ..., role: ...}}")
+        if len(joints_d) != 6:
+            raise LegMapError(
+                f"{lw}.joints: {len(joints_d)} joints listed; legcal-bench models legs of 6 joints (three hip "
+                "joints, knee, ankle pitch, ankle roll, pelvis to foot)" + (
+                    "; a leg without one of them (e.g. no ankle roll) is not supported yet" if len(joints_d) < 6
+                    else "; list only the leg's own joints (hold the others with held_joints_rad)"))
         joints = []
         for i, jd in enumerate(joints_d):
             if not isinstance(jd, dict) or "name" not in jd or "role" not in jd:
