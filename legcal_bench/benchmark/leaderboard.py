@@ -178,6 +178,10 @@ def _plots(groups: dict, out: Path) -> dict:
 
 
 def _save(fig, path: Path) -> str:
+    # tight_layout leaves a placeholder layout engine, for which savefig draws the figure
+    # once more before drawing it into the PNG (a third of the save); the layout is done,
+    # so without it the bytes are the same.
+    fig.set_layout_engine(None)
     return save_figure(fig, path, dpi=100).name
 
 
@@ -194,13 +198,16 @@ def _provenance(g: dict) -> str:
 DESIGNED = "designed"  # the designed protocols' leaderboard, under the main one (`bench --protocol --out`)
 
 
-def _protocol_comparison(root: Path) -> list[str]:
+def _protocol_comparison(root: Path, default: dict | None = None) -> list[str]:
     """The designed protocols (`root/designed/results`) against the default stances
-    (`root/results`), paired seed by seed per robot, weld floor: one row per variant."""
+    (`root/results`; `default`: its cells, if loaded already), paired seed by seed per
+    robot, weld floor: one row per variant."""
     designed = root / DESIGNED / "results"
     if not designed.is_dir() or not (root / "results").is_dir():
         return []
     groups, failed = load_results(designed)
+    if default is None:
+        default = load_results(root / "results")[0]
     L = ["## Protocols: the four default stances against a designed protocol", "",
          f"The designed protocols (`legcal-bench design`, their own leaderboard in [{DESIGNED}/]({DESIGNED}/README.md)) "
          "against the default stances, on the seeds both ran (paired: same seed, factory offsets, injection and "
@@ -211,8 +218,8 @@ def _protocol_comparison(root: Path) -> list[str]:
          "| robot | calibrator-variant | seeds | recovery RMS (deg) | designed lower | vs IMU vertical (deg) | "
          "designed lower | designed seeds failed |", "|---|---|---:|---:|---:|---:|---:|---:|"]
     for robot, mode in sorted({(rb, md) for (_, rb, md) in groups if md == "weld"}):
-        rec = {r["variant"]: r for r in compare(designed, root / "results", robot, mode, "recovery_rms")}
-        imu = {r["variant"]: r for r in compare(designed, root / "results", robot, mode, "recovery_vs_imu")}
+        rec = {r["variant"]: r for r in compare(groups, default, robot, mode, "recovery_rms")}
+        imu = {r["variant"]: r for r in compare(groups, default, robot, mode, "recovery_vs_imu")}
         fails = {name: len(cs) for (_, rb, md), g in failed.items() if (rb, md) == (robot, mode)
                  for name, cs in g.items()}
         for name in sorted(set(rec) - {BASELINE}):
@@ -325,7 +332,7 @@ def generate(root: str | Path = "leaderboard") -> str:
         tag = f"{suite}_{robot}_{mode}"
         L += ["", f"![held-out](plots/{plots[tag + '_heldout']}) ![spectra](plots/{plots[tag + '_spectra']})",
               "", f"![per joint](plots/{plots[tag + '_joints']})", ""]
-    L += _protocol_comparison(root)
+    L += _protocol_comparison(root, groups)
     L += _closed_loop(root)
     L += _modelgap(root)
     L += ["## Matched comparison: inter-foot vs Yamane", "",
@@ -344,15 +351,16 @@ def generate(root: str | Path = "leaderboard") -> str:
     return text
 
 
-def compare(a: str | Path, b: str | Path, robot: str, mode: str, metric: str = "recovery_rms") -> list[dict]:
-    """Two result folders (e.g. a designed protocol's and the default's) paired seed by
-    seed for one robot and floor: per calibrator variant, the seeds both have, each
-    side's mean of `metric` (a `METRICS` key) over those seeds, and how often `a` is
-    lower."""
+def compare(a: str | Path | dict, b: str | Path | dict, robot: str, mode: str,
+            metric: str = "recovery_rms") -> list[dict]:
+    """Two result folders (e.g. a designed protocol's and the default's), or their cells
+    as `load_results` groups them, paired seed by seed for one robot and floor: per
+    calibrator variant, the seeds both have, each side's mean of `metric` (a `METRICS`
+    key) over those seeds, and how often `a` is lower."""
     get = METRICS[metric][1]
 
     def cells(root):
-        groups, _ = load_results(Path(root))
+        groups = root if isinstance(root, dict) else load_results(Path(root))[0]
         out: dict = {}
         for (suite, rb, md), g in groups.items():
             if rb == robot and md == mode:
