@@ -157,7 +157,7 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
     from pathlib import Path
 
     from legcal_bench.errors import ConfigError
-    from legcal_bench.evaluation.distill import export, train
+    from legcal_bench.evaluation.distill import DistillConfig, export, train  # the training module's (tests shorten it)
     from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
     from legcal_bench.policies.spec import WALKERS_DIR
     from legcal_bench.policies.zmp_walker import TEACHERS_DIR, load_teacher_recipe
