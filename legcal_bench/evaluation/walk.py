@@ -67,28 +67,79 @@ def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on
             "ang_vel": np.empty((n, 3))} if log else {}
     if log and "ft" in u.observation_space.spaces:
         logs["ft"] = np.empty((n, 2, 6))
+    t0 = _time.perf_counter()
+    if _direct(env, runner, on_step):
+        steps, torque, power, fallen_at = _walk_sim(u, runner, obs, n, t, pelvis, logs)
+    else:
+        steps, torque, power, fallen_at = _walk_env(env, runner, obs, info, n, t, pelvis, logs, on_step)
+    wall = _time.perf_counter() - t0
+    return Walk(seed, seconds, u.offsets.tolist(), u.correction.tolist(), t[:steps], pelvis[:steps],
+                u.sim.strikes.to_dict(), torque / steps, power / steps, fallen_at, wall,
+                runner.privileged, **{k: v[:steps] for k, v in logs.items()})
+
+
+def _direct(env, runner, on_step) -> bool:
+    """True if the walk may step the simulator itself (`_walk_sim`): our walking env,
+    unwrapped, driven by a policy that reads no simulator truth, nothing called per step."""
+    from legcal_bench.envs.walking import WalkingEnv
+    from legcal_bench.policies.runner import PolicyRunner
+
+    return (on_step is None and env is env.unwrapped and type(env) is WalkingEnv and type(runner) is PolicyRunner
+            and not runner.privileged)
+
+
+def _log_step(logs: dict, k: int, obs: dict, foot_loads) -> None:
+    logs["q_enc"][k], logs["gravity"][k], logs["ang_vel"][k] = obs["q_enc"], obs["gravity"], obs["ang_vel"]
+    logs["loads"][k] = np.linalg.norm(obs["ft"][:, :3], axis=1) if "ft" in obs else foot_loads
+    if "ft" in logs:
+        logs["ft"][k] = obs["ft"]
+
+
+def _walk_env(env, runner, obs, info, n, t, pelvis, logs, on_step):
+    """The walk through `env.step` (any env, runner and per-step hook): (steps, summed
+    mean |torque|, summed power, fall time)."""
+    u = env.unwrapped
     torque, power = 0.0, 0.0
     k = 0
-    t0 = _time.perf_counter()
     for k in range(n):
         obs, _, terminated, _, info = env.step(runner.act(obs, info, u.sim.time))
         t[k], pelvis[k] = info["time"], info["pelvis_pose"]
-        if log:
-            logs["q_enc"][k], logs["gravity"][k], logs["ang_vel"][k] = obs["q_enc"], obs["gravity"], obs["ang_vel"]
-            logs["loads"][k] = np.linalg.norm(obs["ft"][:, :3], axis=1) if "ft" in obs else info["foot_loads"]
-            if "ft" in logs:
-                logs["ft"][k] = obs["ft"]
+        if logs:
+            _log_step(logs, k, obs, info["foot_loads"])
         torque += float(np.abs(info["torque"]).mean())
         power += info["power"]
         if on_step is not None:
             on_step(env)
         if terminated:
             break
-    wall = _time.perf_counter() - t0
+    return k + 1, torque, power, info["fallen_at"]
+
+
+def _walk_sim(u, runner, obs, n, t, pelvis, logs):
+    """`_walk_env`'s walk with the same numbers, stepping the env's simulator directly:
+    the same `WalkingSim.step` and observation per control step (`WalkingEnv.step`
+    without its info dict, which the policy does not read), the truth the walk keeps read
+    from the simulator (`WalkingSim.truth`'s), its torque and power sums reduced once
+    at the end (the same per-step reductions, summed in the same order)."""
+    sim = u.sim
+    d, sc = sim.data, sim.scene
+    f, servo, dof = sc.free_qpos_adr, sc.servo[0], sc.dof_adr
+    tau, qvel = np.empty((n, 12)), np.empty((n, 12))
+    k = 0
+    for k in range(n):
+        sim.step(runner.act(obs, None, sim.time))
+        obs = u._observe()
+        t[k], pelvis[k], tau[k], qvel[k] = sim.time, d.qpos[f:f + 7], d.actuator_force[servo], d.qvel[dof]
+        if logs:
+            _log_step(logs, k, obs, sim.loads)
+        if sim.fallen_at is not None:
+            break
     steps = k + 1
-    return Walk(seed, seconds, u.offsets.tolist(), u.correction.tolist(), t[:steps], pelvis[:steps],
-                u.sim.strikes.to_dict(), torque / steps, power / steps, info["fallen_at"], wall,
-                runner.privileged, **{k: v[:steps] for k, v in logs.items()})
+    tau, qvel = tau[:steps], qvel[:steps]
+    # per step: `np.abs(tau).mean()` and `WalkingSim.power`; summed one step after another as `_walk_env` does
+    torque = float(np.add.accumulate(np.abs(tau).mean(axis=1))[-1])
+    power = float(np.add.accumulate(np.abs(tau * qvel).sum(axis=1))[-1])
+    return steps, torque, power, sim.fallen_at
 
 
 def deviation(a: Walk, nominal: Walk) -> dict:
