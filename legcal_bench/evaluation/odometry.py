@@ -83,26 +83,37 @@ def leg_odometry(kin: LegKinematics, q: np.ndarray, loads: np.ndarray, R_WB: np.
     contact point (else the sole's origin, anchored at each change of stance foot)."""
     fk = frame_kinematics(kin, q)
     R_BS, p_BS = np.stack([fk.R_L, fk.R_R]), np.stack([fk.p_L, fk.p_R])  # (2, n, ...)
-    c = np.zeros((len(q), 2, 3)) if cop is None else cop
-
-    def contact(foot, k, point):  # a point of the sole (sole frame) in the base frame
-        return p_BS[foot, k] + R_BS[foot, k] @ point
-
+    n = len(q)
+    c = np.zeros((n, 2, 3)) if cop is None else cop
+    # The stance foot at each step (before, after its switch): the more loaded one, a tie keeping it.
+    before, after = np.empty(n, dtype=int), np.empty(n, dtype=int)
     stance = int(np.argmax(loads[0]))
-    point = c[0, stance]
-    p_WA = p0 + R_WB[0] @ contact(stance, 0, point)
-    out = np.empty((len(q), 3))
-    for k in range(len(q)):
-        p = p_WA - R_WB[k] @ contact(stance, k, point)
-        if loads[k, 1 - stance] > loads[k, stance]:
+    for k, (left, right) in enumerate(loads.tolist()):
+        before[k] = stance
+        if (left if stance else right) > (right if stance else left):
             stance = 1 - stance
-            point = c[k, stance]
-            p_WA = p + R_WB[k] @ contact(stance, k, point)
-        elif cop is not None:  # the foot rolls about its centre of pressure: follow it
-            point = c[k, stance]
-            p_WA = p + R_WB[k] @ contact(stance, k, point)
-        out[k] = p
+        after[k] = stance
+    moved = (after != before) if cop is None else np.ones(n, dtype=bool)  # steps whose anchor p_WA moves
+    # The contact point each step measures from (the one its foot was anchored at) and
+    # the one anchored after it: a point of the sole (sole frame) in the base frame, then
+    # turned into the world (one matrix-vector product per step, as one step at a time).
+    steps = np.arange(n)
+    point = c[np.maximum(steps - 1, 0), before] if cop is not None else c[0, before]
+    a = _turn(R_WB, p_BS[before, steps] + _turn(R_BS[before, steps], point))
+    b = _turn(R_WB, p_BS[after, steps] + _turn(R_BS[after, steps], c[steps, after]))
+    # p = p_WA - R_WB p_BA each step; p_WA = p + R_WB p_BA' where the anchor moves.
+    out = np.empty((n, 3))
+    p_WA, start = p0 + a[0], 0
+    for k in np.flatnonzero(moved).tolist():
+        out[start:k + 1] = p_WA - a[start:k + 1]
+        p_WA, start = out[k] + b[k], k + 1
+    out[start:] = p_WA - a[start:]
     return out
+
+
+def _turn(R: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """R[k] @ v[k] for each k: (n, 3, 3), (n, 3) -> (n, 3)."""
+    return np.matmul(R, v[:, :, None])[:, :, 0]
 
 
 def pose_matrices(poses: np.ndarray) -> np.ndarray:
