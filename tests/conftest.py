@@ -111,3 +111,26 @@ def testbot_legmap(tmp_path_factory) -> Path:
 @pytest.fixture(scope="session")
 def all_robots(testbot_legmap) -> list[str]:
     return BUILTIN + [str(G1_LEGMAP), str(testbot_legmap)]
+
+
+@pytest.fixture
+def in_process_cells(monkeypatch):
+    """`bench` and `sweep` (`legcal_bench.benchmark.runner.run`) compute their session sets
+    and cells here, one after another, instead of in a pool of fresh worker processes
+    (each of which would load the package and the simulation again, seconds per command).
+    For tests that check what the cells compute; the pool itself is tested in
+    tests/benchmark (test_runner, test_process_hygiene)."""
+    from concurrent.futures import Executor, Future
+
+    from legcal_bench.benchmark import runner
+
+    class InProcess(Executor):
+        def submit(self, fn, /, *args, **kwargs):
+            done = Future()
+            try:
+                done.set_result(fn(*args, **kwargs))
+            except BaseException as e:  # the pool would hand it back through the future too
+                done.set_exception(e)
+            return done
+
+    monkeypatch.setattr(runner, "make_executor", lambda scheduler, workers: (InProcess(), None))

@@ -21,6 +21,8 @@ from legcal_bench.robots.design import GENERATED, HIP_ORDERS, stiff_twin
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.hold import HOLD_LIMITS, HoldReport
 
+# bench and sweep run their cells in this process (`in_process_cells`): what is checked
+# is what they compute through a leg map; the worker pool is tested in tests/benchmark.
 SHORT = ["--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "1", "--quiet"]
 NAMES = [d.name for d in GENERATED]
 
@@ -51,7 +53,7 @@ def _score(tmp_path, capsys, robot: Path, bags: Path, *calibrate_args) -> dict:
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_a_generated_robot_runs_every_command_through_its_leg_map(name, generated, tmp_path, capsys):
+def test_a_generated_robot_runs_every_command_through_its_leg_map(name, generated, tmp_path, capsys, in_process_cells):
     robot, twin = generated[name], generated[name + "_stiff"]
     # Zero-noise kinematic recovery, stances shrunk to fit the narrow ankles.
     bags = tmp_path / "kinematic"
@@ -114,7 +116,7 @@ def test_a_robot_that_cannot_hold_is_an_error_in_collect(floppy, tmp_path, capsy
     assert "did not hold the posture" in capsys.readouterr().err
 
 
-def test_a_robot_that_cannot_hold_is_a_failed_cell_in_bench(floppy, tmp_path, capsys):
+def test_a_robot_that_cannot_hold_is_a_failed_cell_in_bench(floppy, tmp_path, capsys, in_process_cells):
     assert main(["bench", "--suite", "smoke", "--robot", str(floppy), "--calibrators", "zero",
                  "--out", str(tmp_path / "lb"), "--data", str(tmp_path / "data"), "--quiet"]) == 0
     cells = [json.loads(p.read_text()) for p in (tmp_path / "lb" / "results").rglob("*.json")]
@@ -160,7 +162,7 @@ def test_collect_replaces_an_earlier_session_set_but_not_other_files(tmp_path):
     assert (tmp_path / "mine" / "notes.txt").read_text() == "keep"
 
 
-def test_bench_takes_collects_stance_and_mjcf_options(tmp_path, capsys):
+def test_bench_takes_collects_stance_and_mjcf_options(tmp_path, capsys, in_process_cells):
     from legcal_bench.robots import ASSETS
 
     assert main(["bench", "--suite", "smoke", "--robots", "a2", "a3", "--mjcf", str(ASSETS / "a3.xml"),
