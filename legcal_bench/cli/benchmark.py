@@ -175,7 +175,8 @@ def cmd_leaderboard(a: argparse.Namespace) -> int:
 
 
 def _bench_modelgap(a: argparse.Namespace, suite) -> int:
-    """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root."""
+    """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root,
+    each case a file in modelgap/cases/ there (kept for a rerun of the same command)."""
     from legcal_bench.benchmark.leaderboard import generate
     from legcal_bench.benchmark.modelgap import CASES, DEFAULT_CALIBRATOR, OUTSIDE_ROBOTS, RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
@@ -220,7 +221,7 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
                multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
                cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots or OUTSIDE_ROBOTS),
-               calibrator=calibrator)
+               calibrator=calibrator, out=Path(a.out) / RESULTS_NAME / "cases", command=made_by)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)

@@ -48,9 +48,10 @@ def test_the_example_recovers_zero_noise_offsets_for_any_robot_it_is_given(dispe
 
 def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_loop(dispersion, tmp_path,
                                                                                   monkeypatch):
-    # The model-gap suite keeps its cases under the working directory (runs/bench/modelgap):
+    # The model-gap suite keeps its cases under --out (lb/modelgap/cases), a fresh folder
     # here, so that every run computes them (never reuses an earlier run's) and parallel
-    # test processes share nothing. Its cases record this test's short sessions.
+    # test processes share nothing; the working directory is the test's too. Its cases
+    # record this test's short sessions.
     from legcal_bench.benchmark import modelgap
 
     monkeypatch.chdir(tmp_path)
@@ -67,6 +68,9 @@ def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_lo
                  "--out", str(tmp_path / "lb"), "--quiet"]) == 0
     rows = json.loads((tmp_path / "lb" / "modelgap" / "modelgap.json").read_text())["rows"]
     assert len(rows) == 4 and all(r["calibrator"]["name"] == "dispersion" for r in rows)
+    cases = [json.loads(p.read_text()) for p in (tmp_path / "lb" / "modelgap" / "cases").rglob("*.json")]
+    assert len(cases) == 4 and not (tmp_path / "runs").exists()  # under --out, not the working directory
+    assert all(c["provenance"]["command"].startswith("legcal-bench bench --suite modelgap") for c in cases)
     assert "`dispersion` (offsets the diagnosis starts from)" in (tmp_path / "lb" / "modelgap" / "modelgap.md").read_text()
     assert main(["walk-eval", "--robot", "a3", "--policy", "a3", "--calibrator", "dispersion", "--trials", "2",
                  "--seconds", "1", "--workers", "1", "--out", str(tmp_path / "we"), "--quiet"]) == 0
