@@ -9,7 +9,7 @@ import numpy as np
 from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
-from legcal_bench.estimation.problem.fit import frame_residuals, offsets_fit
+from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
 from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights
 
 CONTACT_CHECKS = ("flag", "drop", "off")
@@ -50,23 +50,38 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
 
 
 def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[StanceContact]:
+    """Each stance's departure from one plane at the offsets of the others. The others'
+    offsets come with a fixed error of the IMU's vertical as a nuisance, within the
+    recordings' declared bound (`SensorModel.tilt_bound`, the prior's standard
+    deviation): on a robot whose hip does not start with pitch, such a tilt moves the
+    offsets differently with each stance's posture, and a realistic (uncalibrated) IMU
+    would otherwise read as soles off one plane."""
     segs = problem.segments
     names = list(dict.fromkeys(s.recording for s in segs))
     fr = frame_residuals(prep, offsets_fit(prep, dq, segs), segs)
+    bound = prep.stances[0].sensor_model.tilt_bound
+    cols = np.r_[np.arange(12), np.arange(fr.model.n)[fr.model.slices[NOISE_TILT]][:2] if bound > 0 else []]
+    cols = cols.astype(int)
+    prior = np.zeros((len(cols), len(cols)))
+    prior[12:, 12:] = np.eye(len(cols) - 12) / bound**2 if bound > 0 else 0.0
     W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
-    Jw = W @ fr.J[:, :, :12]
+    Jw = W @ fr.J[:, :, cols]
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
-    total = sum(info.values())
+    total = sum(info.values()) + prior
     means = problem.means_at(dq)
-    r, J = fr.stacked(problem.sf, problem.sg, 12)  # the noise-weighted problem's rows
+    r, J = fr.stacked(problem.sf, problem.sg, cols)  # the noise-weighted problem's rows
     owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
-    # The offsets' change without each stance: one Gauss-Newton step on the other rows.
-    delta = {n: -np.linalg.lstsq(J[owner != n], r[owner != n], rcond=None)[0] for n in names}
+    prior_rows = np.sqrt(prior)[12:]
+    # The offsets' change without each stance: one Gauss-Newton step on the other rows
+    # (the IMU tilt within its prior).
+    delta = {n: -np.linalg.lstsq(np.vstack([J[owner != n], prior_rows]),
+                                 np.r_[r[owner != n], np.zeros(len(prior_rows))], rcond=None)[0][:12]
+             for n in names}
     items = []
     for i, s in enumerate(segs):
         m = fr.segment == i
         items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12],
                       "delta": delta[s.recording],
-                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True),
+                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True)[:12, :12],
                       "left_tilt": fr.r[m, 7:9].mean(axis=0)})
     return check_stances(items, sig["encoder"])

@@ -18,8 +18,9 @@ to c_s. Its covariance is
 Sigma_M = sigma_q^2 / N^2 sum_k G_k G_k^T the mean's covariance from encoder noise
 (G_k the frame's inter-foot Jacobian), J_c = D mean_k G_k, Cov(dq_-s) the noise-only
 covariance of the other stances' estimate (the inverse of their whitened information,
-`legcal_bench.estimation.information.whitening`), F = `SYSTEMATIC_FACTOR` for the error that is not
-white noise. chi2 with 3 degrees of freedom per contact
+`legcal_bench.estimation.information.whitening`; with a fixed error of the IMU's vertical as a
+nuisance within the declared tilt bound, `legcal_bench.estimation.checks.contact`), F =
+`SYSTEMATIC_FACTOR` for the error that is not white noise. chi2 with 3 degrees of freedom per contact
 segment; a stance is flagged at a family-wise false-alarm rate `ALPHA` over the
 stances (Bonferroni) when its soles are also off one plane by more than `MIN_TILT_RAD`
 or `MIN_HEIGHT_M` (smaller departures are below what matters at the encoder's
