@@ -62,6 +62,21 @@ def pytest_xdist_make_scheduler(config, log):
     return ModuleGroupScheduling(config, log)
 
 
+# Modules with the longest single tests (tens of seconds to minutes each, issue #36's
+# `--durations`): under pytest-xdist they are queued first among the tests that are not
+# in an xdist group (after the groups, which xdist queues first, largest first), so that
+# none of them starts last and runs alone while the other process idles. Only the order
+# in which the processes take tests changes; a run without pytest-xdist keeps its order.
+SLOW_FIRST = ("tests/evaluation/test_closed_loop.py", "tests/reports/test_regression.py",
+              "tests/evaluation/test_modelgap.py", "tests/protocol/test_robots_as_they_come.py",
+              "tests/benchmark/test_leaderboard.py", "tests/evaluation/test_distill.py", "tests/integrity/")
+
+
+def pytest_collection_modifyitems(config, items):
+    if hasattr(config, "workerinput"):  # a pytest-xdist worker: every worker sorts alike
+        items.sort(key=lambda item: not item.nodeid.startswith(SLOW_FIRST))  # stable: modules keep their order
+
+
 @pytest.fixture(scope="session")
 def pool_workers() -> int:
     """Worker processes a test may start for a pool of its own (the commands' default, 2),
