@@ -47,7 +47,7 @@ def test_the_example_recovers_zero_noise_offsets_for_any_robot_it_is_given(dispe
 
 
 def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_loop(dispersion, tmp_path,
-                                                                                  monkeypatch):
+                                                                                  monkeypatch, collected):
     # The model-gap suite keeps its cases under --out (lb/modelgap/cases), a fresh folder
     # here, so that every run computes them (never reuses an earlier run's) and parallel
     # test processes share nothing; the working directory is the test's too. Its cases
@@ -56,9 +56,9 @@ def test_the_example_runs_through_diagnose_the_model_gap_suite_and_the_closed_lo
 
     monkeypatch.chdir(tmp_path)
     monkeypatch.setattr(modelgap, "COLLECT", {"stance_s": 4.0, "standing_s": 1.0})
-    bags = tmp_path / "set"
-    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"),
-                          stance_s=4.0, heldout=1, heldout_s=2.0, standing_s=1.0), bags, progress=False)
+    # Read only: shared per test process (test_training_only collects the same set).
+    bags = collected(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"),
+                     stance_s=4.0, heldout=1, heldout_s=2.0, standing_s=1.0)
     assert main(["diagnose", "--robot", "a3", "--bags", str(bags), "--calibrator", "dispersion",
                  "--out", str(tmp_path / "dg"), "--quiet"]) == 0
     doc = json.loads((tmp_path / "dg" / "diagnosis.json").read_text())

@@ -10,7 +10,6 @@ import pytest
 
 from legcal_bench.cli import main
 from legcal_bench.data.recording import load_session
-from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 
 SPY = '''
@@ -47,10 +46,10 @@ def spy(install_plugin, tmp_path, monkeypatch):
 
 
 @pytest.fixture
-def session(tmp_path):
-    out = tmp_path / "set"
-    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"),
-                          **SHORT), out, progress=False)
+def session(collected):
+    """Read only (calibrate and diagnose write to their --out): shared per test process,
+    with test_plugin_example's set of the same config."""
+    out = collected(robot="a3", mode="weld", sensors="calibrated-imu", seed=0, stances=("I", "II", "III"), **SHORT)
     assert any(r.kind == "heldout" for r in load_session(out))  # the data hold what must not leak
     return out
 
