@@ -114,6 +114,9 @@ def install_baseline(rev: str, work: Path) -> tuple[Path, Path]:
         raise ConfigError(f"bench-speed --baseline {rev!r}: not a commit of this repository "
                           f"({archive.stderr.decode().strip()})")
     subprocess.run(["tar", "-x", "-C", str(src)], input=archive.stdout, check=True)
+    shared = root.parent / "shared"
+    if shared.is_dir():  # the examples' ../shared (the G1's model), as beside the checkout: its tests run too
+        (src.parent / "shared").symlink_to(shared)
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-deps",
                     "--no-build-isolation", "--target", str(site), str(src)], check=True, capture_output=True)
     return site, src
