@@ -47,7 +47,7 @@ from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry
-from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, score
+from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, score_beyond
 from legcal_bench.estimation.modelgap.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
@@ -438,7 +438,7 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     groups = {f"{side} leg": white(J) for side, J in zip(SIDES, legs)}
     groups["IMU"] = whiten(fr.H)
     for name, C in groups.items():
-        d, dof = score(zr, Qn, C, ctx.resolution)
+        d, dof = score_beyond(zr, Qn, C, ctx.resolution)
         out["locations"][name] = {"delta_chi2": d, "dof": dof, "excess": d - dof, "log10_p": _log10_sf(d, dof)}
     # Signatures per joint.
     values = {"angle": fr.q_enc, "load": _loads(ctx, fr), "motion": _motion(ctx, fr)}
@@ -450,13 +450,13 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
         C = whiten(joint_columns(fr.G, v))
         per = []
         for j in range(12):
-            d, dof = score(zr, Qn, C[:, [j]], ctx.resolution)
+            d, dof = score_beyond(zr, Qn, C[:, [j]], ctx.resolution)
             per.append({"joint": names[j], "delta_chi2": d, "dof": dof, "excess": d - dof,
                         "log10_p": _log10_sf(d, dof)})
         out["signatures"][fam] = per
     t = np.array([ctx.recordings[r].time[i] for r, i in zip(fr.recording, fr.time_index)]) \
         if all(r in ctx.recordings for r in set(fr.recording)) else fr.time_index.astype(float)
-    d, dof = score(zr, Qn, whiten(time_columns(fr.segment, t)), ctx.resolution)
+    d, dof = score_beyond(zr, Qn, whiten(time_columns(fr.segment, t)), ctx.resolution)
     out["signatures"]["time"] = [{"joint": "(every row, per segment)", "delta_chi2": d, "dof": dof,
                                   "excess": d - dof, "log10_p": _log10_sf(d, dof)}]
     # The location explaining the most beyond what its parameters would take from noise.

@@ -43,7 +43,12 @@ def score(z: np.ndarray, N: np.ndarray, C: np.ndarray, resolution: float = 0.0) 
     """(delta_chi2, degrees of freedom) of columns C beyond the nuisance columns N, over
     the directions of C whose residue beyond N exceeds `resolution` (relative to C's
     largest singular value; `RANK_RTOL` at least)."""
-    Qn = basis(N)
+    return score_beyond(z, basis(N), C, resolution)
+
+
+def score_beyond(z: np.ndarray, Qn: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> tuple[float, int]:
+    """`score` with the nuisance columns given by their orthonormal basis Qn (`basis`):
+    many candidates tested against one nuisance share its factorization."""
     Cp = C - Qn @ (Qn.T @ C)
     zp = z - Qn @ (Qn.T @ z)
     if C.shape[1] == 0 or not np.abs(C).max(initial=0.0) > 0:
