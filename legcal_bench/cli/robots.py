@@ -20,7 +20,8 @@ def cmd_info(a: argparse.Namespace) -> int:
 
     from legcal_bench.protocol.servos import servo_gains
     from legcal_bench.robots import BUILTIN, load_robot
-    from legcal_bench.robots.kinematics import LegKinematics
+    from legcal_bench.robots.design import ROLE_AXIS
+    from legcal_bench.robots.kinematics import LegKinematics, axis_warnings
 
     if a.robot is None:
         print("built-in robots (or pass --robot path/to/robot.legmap.yaml):")
@@ -30,34 +31,46 @@ def cmd_info(a: argparse.Namespace) -> int:
     legmap = load_robot(a.robot, a.mjcf)
     kin = LegKinematics(legmap)
     info = {
-        "name": legmap.name, "mjcf": str(legmap.mjcf),
+        "name": legmap.name, "mjcf": str(legmap.mjcf), **({"urdf": str(legmap.urdf)} if legmap.urdf else {}),
         "hip_order": "->".join(r.replace("hip_", "") for r in legmap.hip_order),
         "dims_m": asdict(kin.dims), "knee_straight_deg": float(np.rad2deg(legmap.knee_straight_rad)),
         "held_joints_deg": {k: float(np.rad2deg(v)) for k, v in legmap.held_joints_rad.items()},
         "joints": [],
     }
     axes = kin.joint_axes()
+    signs, angles = kin.role_axes()
     gains = servo_gains(legmap)
     info["servo_gains_note"] = gains.note
+    info["axis_warnings"] = axis_warnings(kin)
+    axis_name = {(1.0, 0.0, 0.0): "x", (0.0, 1.0, 0.0): "y", (0.0, 0.0, 1.0): "z"}
     for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
         info["joints"].append({
             "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axes[i], 6).tolist(),
-            "limits_deg": np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist(),
-            "servo": {"kp": gains.kp[i], "kd": gains.kd[i], "source": gains.source[i]}})
+            # The role's pelvis axis, the axis's angle to it and whether it points the other way (mirrored).
+            "role_axis": axis_name[ROLE_AXIS[role]], "angle_to_role_axis_deg": round(float(np.degrees(angles[i])), 3),
+            "mirrored": bool(signs[i] < 0),
+            "limits_deg": (np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist() if kin.limited[i]
+                           else None),
+            "servo": {"kp": gains.kp[i] + 0.0, "kd": gains.kd[i] + 0.0, "source": gains.source[i]}})
     if a.json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"{info['name']}: {info['mjcf']}")
+    print(f"{info['name']}: {info.get('urdf', info['mjcf'])}" + (f" (simulated as {info['mjcf']})" if legmap.urdf else ""))
     print(f"  hip order {info['hip_order']}; leg length {kin.dims.leg_length:.3f} m, "
           f"feet at y = ±{kin.dims.foot_y:.3f} m; sole {kin.dims.sole_length:.3f} x {kin.dims.sole_width:.3f} m")
-    print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} {'limits (deg)':<16} "
-          "servo kp, kd (source)")
+    print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} {'to role axis':<16} "
+          f"{'limits (deg)':<16} servo kp, kd (source)")
     for j in info["joints"]:
         ax = " ".join(f"{v:+.3f}" for v in j["axis_in_pelvis_at_zero"])
+        rel = f"{j['angle_to_role_axis_deg']:4.1f}° {'-' if j['mirrored'] else '+'}{j['role_axis']}"
+        lim = ("unlimited" if j["limits_deg"] is None else
+               f"{j['limits_deg'][0]:+6.1f} .. {j['limits_deg'][1]:+6.1f}")
         sv = j["servo"]
-        print(f"  {j['index']:>2} {j['name']:<28} {j['role']:<12} {ax:<26} "
-              f"{j['limits_deg'][0]:+6.1f} .. {j['limits_deg'][1]:+6.1f} {sv['kp']:7.0f}, {sv['kd']:5.1f} ({sv['source']})")
+        print(f"  {j['index']:>2} {j['name']:<28} {j['role']:<12} {ax:<26} {rel:<16} {lim:<16} "
+              f"{sv['kp']:7.0f}, {sv['kd']:5.1f} ({sv['source']})")
     print(f"  servo gains for static collection: {gains.note}")
+    for w in info["axis_warnings"]:
+        print(f"  warning: {w}")
     if info["held_joints_deg"]:
         print("  held joints (deg): " + ", ".join(f"{k} {v:+.2f}" for k, v in info["held_joints_deg"].items()))
     return 0

@@ -142,6 +142,7 @@ class LegKinematics:
         lower = m.lowerPositionLimit[self.leg_q_idx]
         upper = m.upperPositionLimit[self.leg_q_idx]
         finite = np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
+        self.limited = finite  # (12,) False: the model gives the joint no range (searched within +-pi)
         self.q_lower = np.where(finite, lower, -np.pi)
         self.q_upper = np.where(finite, upper, np.pi)
         knees = [i for i, r in enumerate(legmap.joint_roles) if r == "knee"]

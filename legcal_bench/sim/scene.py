@@ -217,7 +217,7 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
             kp[k], kd[k] = legmap.servo_gains[name]
             source.append("leg map")
         elif a >= 0:
-            kp[k], kd[k] = model.actuator_gainprm[a, 0], -model.actuator_biasprm[a, 2]
+            kp[k], kd[k] = model.actuator_gainprm[a, 0], 0.0 - model.actuator_biasprm[a, 2]  # no -0.0
             source.append("MJCF")
         else:
             source.append("none")

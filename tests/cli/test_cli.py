@@ -58,6 +58,32 @@ def test_info_lists_joint_order_and_axes(capsys):
     info = json.loads(capsys.readouterr().out)
     assert [j["role"] for j in info["joints"][:3]] == ["hip_roll", "hip_yaw", "hip_pitch"]
     assert info["joints"][2]["axis_in_pelvis_at_zero"] == [0.0, 1.0, 0.0]
+    assert info["axis_warnings"] == [] and {j["angle_to_role_axis_deg"] for j in info["joints"]} == {0.0}
+
+
+def test_info_reads_gains_unlimited_joints_and_canted_axes_as_they_are(tmp_path, capsys):
+    import math
+    from dataclasses import replace
+
+    from legcal_bench.robots.build import write_robot
+    from legcal_bench.robots.design import A3
+
+    robot = write_robot(replace(A3, name="a3_cant45", hip_cant=math.radians(45)), tmp_path)
+    xml = tmp_path / "a3_cant45.xml"
+    text = xml.read_text()
+    text = text.replace('name="left_knee_joint" axis="0 1 0" range="-0.08 2.6"', 'name="left_knee_joint" axis="0 1 0"')
+    text = text.replace('joint="left_knee_joint" kp="2000" kv="80"', 'joint="left_knee_joint" kp="2000" kv="0"')
+    assert text != xml.read_text()
+    xml.write_text(text)
+    assert main(["info", "--robot", str(robot), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    knee = info["joints"][3]
+    assert knee["limits_deg"] is None and knee["servo"]["kd"] == 0.0 and math.copysign(1, knee["servo"]["kd"]) == 1
+    assert [j["angle_to_role_axis_deg"] for j in info["joints"][:3]] == [0.0, 45.0, 45.0]
+    assert len(info["axis_warnings"]) == 4
+    assert main(["info", "--robot", str(robot)]) == 0
+    out = capsys.readouterr().out
+    assert "unlimited" in out and "-0.0" not in out and "45.0° +x" in out and "warning: joint left_hip_roll_joint" in out
 
 
 def test_render_writes_a_png(tmp_path, capsys):

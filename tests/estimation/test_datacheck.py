@@ -205,7 +205,7 @@ def test_check_command_prints_what_each_check_measures(sessions, tmp_path, capsy
     assert main(["check", "--robot", "a3", "--bags", str(out), "--json"]) == 0
     d = json.loads(capsys.readouterr().out)
     assert [r["name"] for r in d["recordings"]] == ["standing", "stance_I", "stance_II", "stance_III", "stance_IV"]
-    assert d["warnings"] == []
+    assert d["warnings"] == [] and d["offsets_from"].startswith("offsets profiled out")
     assert max(r["dispersion_mm"] for r in d["recordings"]) < 1.0
     res = tmp_path / "r.json"
     assert main(["calibrate", "--robot", "a3", "--bags", str(out), "--out", str(res)]) == 0
@@ -215,7 +215,7 @@ def test_check_command_prints_what_each_check_measures(sessions, tmp_path, capsy
     assert "disp mm" in text and "limits: identical run 10 frames" in text and "no data warnings" in text
 
 
-def test_without_an_estimate_the_checks_judge_at_profiled_offsets_and_raise_no_false_alarm(tmp_path):
+def test_without_an_estimate_the_checks_judge_at_profiled_offsets_and_raise_no_false_alarm(tmp_path, capsys):
     """Clean data with +-3 deg offsets: judged on the raw encoders alone, the soles look
     off one plane (tens of mm); at the profiled offsets nothing is flagged."""
     from legcal_bench.estimation.checks.profile import profiled_offsets
@@ -232,3 +232,8 @@ def test_without_an_estimate_the_checks_judge_at_profiled_offsets_and_raise_no_f
     assert np.degrees(np.abs(dq - truth)).max() < 0.5  # realistic sensors: the IMU tilt's share, not the offsets
     none, why = profiled_offsets(lm, [r for r in recs if r.kind == "standing"])
     assert none is None and "not profiled out" in why and "--result" in why
+    from legcal_bench.cli import main  # the command without --result: the same
+
+    capsys.readouterr()
+    assert main(["check", "--robot", "a3", "--bags", str(tmp_path), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["warnings"] == []
