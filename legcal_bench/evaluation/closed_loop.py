@@ -97,23 +97,37 @@ def _walker(cfg: ClosedLoopConfig):
     the policy's or the robot's files changed."""
     from legcal_bench.envs.walking import WalkingEnv
     from legcal_bench.policies.runner import PolicyRunner
-    from legcal_bench.robots import load_robot
 
     key = (cfg.robot, cfg.mjcf, cfg.policy, cfg.walk_sensors)
     hit = getattr(_WALKERS, "cached", None)  # (key, file stamps, legmap, env, runner)
     if hit is not None and hit[0] == key and hit[1] == _stamp(hit[2], hit[4]):
         return hit[2:]
-    legmap = load_robot(cfg.robot, cfg.mjcf)
+    legmap = _robot(cfg)[0]
     env = WalkingEnv(robot=legmap, policy=cfg.policy, sensors=cfg.walk_sensors)
     runner = PolicyRunner(env.policy_spec, legmap)
     _WALKERS.cached = (key, _stamp(legmap, runner), legmap, env, runner)
     return legmap, env, runner
 
 
-def _stamp(legmap, runner) -> tuple:
-    """Modification times of the files a cached walker was built from."""
-    spec = runner.spec
-    files = (legmap.source, legmap.mjcf, spec.path, spec.model_file)
+def _robot(cfg: ClosedLoopConfig):
+    """(legmap, its leg kinematics) of `cfg`, loaded once per thread for the static
+    estimates, walks and odometry of every trial, reloaded if the robot's files changed."""
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    key = (cfg.robot, cfg.mjcf)
+    hit = getattr(_WALKERS, "robot", None)  # (key, file stamps, legmap, kinematics)
+    if hit is not None and hit[0] == key and hit[1] == _stamp(hit[2]):
+        return hit[2:]
+    legmap = load_robot(cfg.robot, cfg.mjcf)
+    _WALKERS.robot = (key, _stamp(legmap), legmap, LegKinematics(legmap))
+    return _WALKERS.robot[2:]
+
+
+def _stamp(legmap, runner=None) -> tuple:
+    """Modification times of the files a cached walker (or leg map) was built from."""
+    spec = runner.spec if runner is not None else None
+    files = (legmap.source, legmap.mjcf) + ((spec.path, spec.model_file) if spec is not None else ())
     return tuple(Path(f).stat().st_mtime_ns if f is not None and Path(f).exists() else None for f in files)
 
 
@@ -125,9 +139,8 @@ def static_estimate(cfg: ClosedLoopConfig, seed: int) -> dict:
     from legcal_bench.data.recording import load_session
     from legcal_bench.errors import HoldError
     from legcal_bench.protocol.collect import CollectConfig, collect
-    from legcal_bench.robots import load_robot
 
-    legmap = load_robot(cfg.robot, cfg.mjcf)
+    legmap = _robot(cfg)[0]
     dq = trial_offsets(cfg.offsets, legmap, seed)
     t0 = time.perf_counter()
     failed, result, others = None, None, {}  # failed: a static session set the robot could not hold
@@ -160,11 +173,10 @@ def trial_walk(cfg: ClosedLoopConfig, seed: int, condition: str, estimate: np.nd
 
 def trial_odometry_of(cfg: ClosedLoopConfig, seed: int, nominal, static: dict) -> dict | None:
     """`trial_odometry` of trial `seed`'s nominal walk (None if its static set failed)."""
-    from legcal_bench.robots import load_robot
-
     if static["failed"]:
         return None
-    return trial_odometry(load_robot(cfg.robot, cfg.mjcf), nominal, static["dq"], static["dq_hat"])
+    legmap, kin = _robot(cfg)
+    return trial_odometry(legmap, nominal, static["dq"], static["dq_hat"], kin)
 
 
 def assemble_trial(cfg: ClosedLoopConfig, seed: int, static: dict, walks: dict, odometry: dict | None) -> dict:
@@ -204,15 +216,16 @@ def assemble_trial(cfg: ClosedLoopConfig, seed: int, static: dict, walks: dict, 
     return out
 
 
-def trial_odometry(legmap, nominal, dq: np.ndarray, dq_hat: np.ndarray) -> dict:
+def trial_odometry(legmap, nominal, dq: np.ndarray, dq_hat: np.ndarray, kin=None) -> dict:
     """Leg odometry of the nominal walk with the trial's offsets added to its logged
     encoders afterwards (q_enc - dq), before and after the correction (+ dq_hat), and
-    without offsets; and the vertical drift per degree of symmetric hip-pitch offset."""
+    without offsets; and the vertical drift per degree of symmetric hip-pitch offset.
+    `kin`: the leg map's `LegKinematics`, if already built."""
     from legcal_bench.evaluation.odometry import (centre_of_pressure, imu_orientation, leg_odometry, odometry_errors,
                                                   pitch_sensitivity, pose_matrices, sole_from_ft)
     from legcal_bench.robots.kinematics import LegKinematics
 
-    kin = LegKinematics(legmap)
+    kin = LegKinematics(legmap) if kin is None else kin
     truth = pose_matrices(nominal.pelvis)
     dt = float(nominal.time[1] - nominal.time[0])
     R_WB = imu_orientation(nominal.gravity, nominal.ang_vel, dt, truth[0, :3, :3])
