@@ -50,8 +50,9 @@ class SegmentData:
 
 class Effect(ABC):
     """One model-gap effect. Subclasses set `name` and `summary` (and `needs_ft` if they
-    read the ankle wrenches), implement `parameters` and any of `joint_map`, `factors`,
-    `imu_axes`."""
+    read the ankle wrenches: only such an effect reads loads, at `SegmentData.q_ref`,
+    and a fit with one re-evaluates them at its own offsets), implement `parameters` and
+    any of `joint_map`, `factors`, `imu_axes`."""
 
     name: str = ""
     summary: str = ""

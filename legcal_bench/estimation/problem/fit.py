@@ -79,7 +79,10 @@ def fit_model(prep: Prepared, effects=(), segments: list[Segment] | None = None,
     confounds = start_confounds(prep, model, dq0, segments)
     held = tuple(model.names.index(h) for h in confounds["held"])
     q_ref = dq0
-    for _ in range(2):  # loads at the offsets-only estimate, then at the effects fit's
+    # Loads at the offsets-only estimate, then at the effects fit's: only an effect that
+    # reads loads (the ankle wrenches through the chain, `needs_ft`) sees `q_ref`; for the
+    # others a second pass would solve the same problem again from its own optimum.
+    for _ in range(2 if any(e.needs_ft for e in model.effects) else 1):
         problem = StanceProblem.of(prep, segments, model=model, q_ref=q_ref, held=held)
         x, _, _ = problem.solve_trimmed(x, opts)
         q_ref = x[:12]
