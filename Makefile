@@ -10,7 +10,7 @@ export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: demo test install bench-env bench-standard clean
+.PHONY: demo test test-slow install bench-env bench-standard clean
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,11 @@ demo: $(STAMP)
 TEST_WORKERS ?= 2
 test: $(STAMP)
 	$(BIN)/python -m pytest -n $(TEST_WORKERS)
+
+# The tests marked slow: the same checks over more robots than the test command's budget
+# holds (tests/protocol/test_robots_as_they_come.py's other five hip orders).
+test-slow: $(STAMP)
+	$(BIN)/python -m pytest -n $(TEST_WORKERS) -m slow
 
 bench-env: $(STAMP)
 	$(BIN)/legcal-bench bench-env --out reports/bench_env
