@@ -17,8 +17,11 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_speed(a: argparse.Namespace) -> int:
-    from legcal_bench.reports.bench_speed import run_bench_speed
+    from legcal_bench.reports.bench_speed import rerender, run_bench_speed
 
+    if a.rerender:
+        print(rerender(a.out))
+        return 0
     print(run_bench_speed(a.out, robot=a.robot, repeats=a.repeats, rounds=a.rounds, baseline=a.baseline,
                           groups=a.groups, progress=not a.quiet))
     return 0
@@ -195,4 +198,7 @@ def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
                          "the code at hand")
     bs.add_argument("--out", default="reports/bench_speed", help="report directory (report.md, report.json)")
     bs.add_argument("--quiet", action="store_true", help="no progress lines")
+    bs.add_argument("--rerender", action="store_true",
+                    help="run nothing: write --out's report again from the probe runs its report.json keeps, with "
+                         "the labels and targets of the code at hand")
     bs.set_defaults(func=cmd_bench_speed)

@@ -69,3 +69,14 @@ def test_a_stopped_run_resumes_from_the_probe_runs_it_kept(tmp_path, monkeypatch
     calls.clear()
     bench_speed.run_bench_speed(tmp_path, **{**kwargs, "rounds": 1})  # a finished run starts afresh
     assert len(calls) == 1
+
+
+def test_a_report_is_written_again_from_its_runs(tmp_path, monkeypatch):
+    from legcal_bench.reports import bench_speed
+
+    monkeypatch.setattr(bench_speed, "run_probe", lambda *a: _run({"help": {"unit": "s", "values": [0.2]}}))
+    first = bench_speed.run_bench_speed(tmp_path, baseline="none", groups=("startup",), rounds=1, progress=False)
+    assert "| `legcal-bench --help`, s | – | 0.200 | – | <= 0.5 | yes |" in first
+    monkeypatch.setitem(bench_speed.TARGETS, "help", ("help, relabelled", None))
+    again = bench_speed.rerender(tmp_path)
+    assert "| help, relabelled | – | 0.200 |" in again and "Medians over 1 rounds" in again
