@@ -123,6 +123,10 @@ def install_baseline(rev: str, work: Path) -> tuple[Path, Path]:
         (src.parent / "shared").symlink_to(shared)
     subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-deps",
                     "--no-build-isolation", "--target", str(site), str(src)], check=True, capture_output=True)
+    # The tree's tests import the installed baseline (`site`, on PYTHONPATH): its source
+    # package, first on sys.path in the tree, would take the package's other folders
+    # (calibrators/, envs/, policies/) from the code at hand's editable install.
+    (src / "legcal_bench").rename(src / "legcal_bench.source")
     return site, src
 
 
