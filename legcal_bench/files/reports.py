@@ -8,9 +8,14 @@ from typing import Any
 from legcal_bench.files.atomic import atomic_write_json, atomic_write_text
 
 
+def report_data(out: str | Path, name: str = "report") -> Path:
+    """The JSON file of the report `write_report` writes into `out`."""
+    return Path(out) / f"{name}.json"
+
+
 def write_report(out: str | Path, markdown: str, data: Any, name: str = "report") -> str:
     """Write `<out>/<name>.md` and `<out>/<name>.json` atomically; returns the markdown."""
     out = Path(out)
-    atomic_write_json(out / f"{name}.json", data)
+    atomic_write_json(report_data(out, name), data)
     atomic_write_text(out / f"{name}.md", markdown)
     return markdown

@@ -266,7 +266,9 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
 def rerender(out: str | Path) -> str:
     """Write `out`'s report again from the probe runs its report.json keeps, with the
     labels and targets of the code at hand (the runs' provenance and settings kept)."""
-    path = Path(out) / "report.json"
+    from legcal_bench.files.reports import report_data
+
+    path = report_data(out)
     if not path.is_file():
         raise ConfigError(f"bench-speed --rerender: {path} does not exist; run bench-speed --out {out} first")
     d = json.loads(path.read_text())
