@@ -20,7 +20,7 @@ def cmd_info(a: argparse.Namespace) -> int:
 
     from legcal_bench.protocol.servos import servo_gains
     from legcal_bench.robots import BUILTIN, load_robot
-    from legcal_bench.robots.design import ROLE_AXIS
+    from legcal_bench.robots.design import ROLE_AXIS_NAME
     from legcal_bench.robots.kinematics import LegKinematics, axis_warnings
 
     if a.robot is None:
@@ -42,16 +42,15 @@ def cmd_info(a: argparse.Namespace) -> int:
     gains = servo_gains(legmap)
     info["servo_gains_note"] = gains.note
     info["axis_warnings"] = axis_warnings(kin)
-    axis_name = {(1.0, 0.0, 0.0): "x", (0.0, 1.0, 0.0): "y", (0.0, 0.0, 1.0): "z"}
     for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
         info["joints"].append({
             "index": i, "name": name, "role": role, "axis_in_pelvis_at_zero": np.round(axes[i], 6).tolist(),
             # The role's pelvis axis, the axis's angle to it and whether it points the other way (mirrored).
-            "role_axis": axis_name[ROLE_AXIS[role]], "angle_to_role_axis_deg": round(float(np.degrees(angles[i])), 3),
+            "role_axis": ROLE_AXIS_NAME[role], "angle_to_role_axis_deg": round(float(np.degrees(angles[i])), 3),
             "mirrored": bool(signs[i] < 0),
             "limits_deg": (np.round(np.rad2deg([kin.q_lower[i], kin.q_upper[i]]), 3).tolist() if kin.limited[i]
                            else None),
-            "servo": {"kp": gains.kp[i] + 0.0, "kd": gains.kd[i] + 0.0, "source": gains.source[i]}})
+            "servo": {"kp": gains.kp[i], "kd": gains.kd[i], "source": gains.source[i]}})
     if a.json:
         print(json.dumps(info, indent=2))
         return 0

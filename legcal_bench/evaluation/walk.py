@@ -117,18 +117,19 @@ def _walk_env(env, runner, obs, info, n, t, pelvis, logs, on_step):
 
 def _walk_sim(u, runner, obs, n, t, pelvis, logs):
     """`_walk_env`'s walk with the same numbers, stepping the env's simulator directly:
-    the same `WalkingSim.step` and observation per control step (`WalkingEnv.step`
-    without its info dict, which the policy does not read), the truth the walk keeps read
+    the same `WalkingSim.step` and observation per control step (`WalkingEnv.advance`:
+    `step` without its info dict, which the policy does not read), the truth the walk keeps read
     from the simulator (`WalkingSim.truth`'s), its torque and power sums reduced once
     at the end (the same per-step reductions, summed in the same order)."""
+    from legcal_bench.sim.walking import servo_power
+
     sim = u.sim
     d, sc = sim.data, sim.scene
     f, servo, dof = sc.free_qpos_adr, sc.servo[0], sc.dof_adr
     tau, qvel = np.empty((n, 12)), np.empty((n, 12))
     k = 0
     for k in range(n):
-        sim.step(runner.act(obs, None, sim.time))
-        obs = u._observe()
+        obs = u.advance(runner.act(obs, None, sim.time))
         t[k], pelvis[k], tau[k], qvel[k] = sim.time, d.qpos[f:f + 7], d.actuator_force[servo], d.qvel[dof]
         if logs:
             _log_step(logs, k, obs, sim.loads)
@@ -138,7 +139,7 @@ def _walk_sim(u, runner, obs, n, t, pelvis, logs):
     tau, qvel = tau[:steps], qvel[:steps]
     # per step: `np.abs(tau).mean()` and `WalkingSim.power`; summed one step after another as `_walk_env` does
     torque = float(np.add.accumulate(np.abs(tau).mean(axis=1))[-1])
-    power = float(np.add.accumulate(np.abs(tau * qvel).sum(axis=1))[-1])
+    power = float(np.add.accumulate(servo_power(tau, qvel))[-1])
     return steps, torque, power, sim.fallen_at
 
 

@@ -28,6 +28,7 @@ ROLE_AXIS = {
     "ankle_pitch": (0.0, 1.0, 0.0),
     "ankle_roll": (1.0, 0.0, 0.0),
 }
+ROLE_AXIS_NAME = {role: "xyz"[axis.index(1.0)] for role, axis in ROLE_AXIS.items()}  # "y" for hip_pitch, ...
 
 Vec3 = tuple[float, float, float]
 

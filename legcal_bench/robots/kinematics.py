@@ -32,7 +32,7 @@ from scipy.optimize import least_squares
 from legcal_bench.errors import IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
-from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS
+from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS, ROLE_AXIS_NAME
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 
 
@@ -690,12 +690,11 @@ def axis_warnings(kin: LegKinematics) -> list[str]:
     """A warning per leg joint whose axis is more than `ROLE_AXIS_WARN_RAD` from the
     pelvis axis its role names (`LegKinematics.role_axes`)."""
     _, angles = kin.role_axes()
-    axis_name = {(1.0, 0.0, 0.0): "x", (0.0, 1.0, 0.0): "y", (0.0, 0.0, 1.0): "z"}
     out = []
     for name, role, a in zip(kin.legmap.joint_names, kin.legmap.joint_roles, angles):
         if a > ROLE_AXIS_WARN_RAD:
             out.append(f"joint {name}: its axis is {math.degrees(a):.0f} deg from the pelvis "
-                       f"{axis_name[ROLE_AXIS[role]]} axis its role {role} names; the presets, pitch sums and "
+                       f"{ROLE_AXIS_NAME[role]} axis its role {role} names; the presets, pitch sums and "
                        "observability read it by that role: check the leg map's role for it")
     return out
 

@@ -315,12 +315,18 @@ class WalkingSim:
         return self.data.actuator_force[self.scene.servo[0]].copy()
 
     def power(self, torques: np.ndarray | None = None) -> float:
-        """Mechanical power of the leg servos (W): sum |tau * qdot|."""
+        """Mechanical power of the leg servos (W): sum |tau * qdot| (`servo_power`)."""
         tau = self.torques() if torques is None else torques
-        return float(np.abs(tau * self.data.qvel[self.scene.dof_adr]).sum())
+        return float(servo_power(tau, self.data.qvel[self.scene.dof_adr]))
 
     def truth(self) -> dict:
         tau = self.torques()
         return {"time": self.time, "pelvis_pose": self.pelvis_pose(), "q_true": self.data.qpos[self.scene.qpos_adr],
                 "torque": tau, "power": self.power(tau), "fallen": self.fallen_at is not None,
                 "fallen_at": self.fallen_at, "offsets": self.offsets.copy(), "correction": self.correction.copy()}
+
+
+def servo_power(tau: np.ndarray, qvel: np.ndarray) -> np.ndarray:
+    """Mechanical power of the leg servos (W), sum |tau * qdot| over the last axis: one
+    step's (12,) or many steps' (n, 12) at once."""
+    return np.abs(tau * qvel).sum(axis=-1)

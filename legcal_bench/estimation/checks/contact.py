@@ -60,10 +60,10 @@ def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig
     names = list(dict.fromkeys(s.recording for s in segs))
     fr = frame_residuals(prep, offsets_fit(prep, dq, segs), segs)
     bound = prep.stances[0].sensor_model.tilt_bound
-    cols = np.r_[np.arange(12), np.arange(fr.model.n)[fr.model.slices[NOISE_TILT]][:2] if bound > 0 else []]
-    cols = cols.astype(int)
+    tilt = np.arange(fr.model.n)[fr.model.slices[NOISE_TILT]][:2] if bound > 0 else np.zeros(0, dtype=int)
+    cols = np.r_[np.arange(12), tilt]
     prior = np.zeros((len(cols), len(cols)))
-    prior[12:, 12:] = np.eye(len(cols) - 12) / bound**2 if bound > 0 else 0.0
+    prior[12:, 12:] = np.eye(len(tilt)) / bound**2 if bound > 0 else 0.0
     W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
     Jw = W @ fr.J[:, :, cols]
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
