@@ -1,7 +1,8 @@
 """The leg map: what legcal-bench needs to know about any robot beyond its MJCF or URDF.
 
-A small YAML file names the 12 leg joints (left leg then right, each from pelvis to
-foot) with their roles, the sole frames and their four corner points, the pelvis and
+A small YAML file names the leg joints (left leg then right, each from pelvis to foot:
+six per leg, or five where a leg has no ankle roll and the leg map declares it absent)
+with their roles, the sole frames and their four corner points, the pelvis and
 the IMU placement, the angles at which any other joint is held, and servo gains when
 the MJCF drives torque motors. See docs/leg-map.md for the schema.
 """
@@ -20,6 +21,8 @@ from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 SCHEMA = "legcal-legmap/1"
 SIDES = ("left", "right")
 CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
+# Roles a leg map may declare absent (`absent_roles`): a 5-joint leg without ankle roll.
+ABSENT_ALLOWED = ("ankle_roll",)
 
 
 @dataclass(frozen=True)
@@ -94,6 +97,31 @@ class LegMap:
     def hip_order(self) -> tuple[str, str, str]:
         return self.legs["left"].hip_order
 
+    @property
+    def leg_joints(self) -> int:
+        """Joints per leg (both legs have the same roles): 6, or 5 without an ankle roll."""
+        return len(self.legs["left"].joints)
+
+    @property
+    def n_joints(self) -> int:
+        """Leg joints of both legs: the length of every joint vector (q, offsets)."""
+        return 2 * self.leg_joints
+
+    def leg_slice(self, side: str | int) -> slice:
+        """The columns of one leg in a joint vector (leg-map order: left, then right)."""
+        i = SIDES.index(side) if isinstance(side, str) else int(side)
+        return slice(i * self.leg_joints, (i + 1) * self.leg_joints)
+
+    def side_of(self, index: int) -> str:
+        """The leg ('left'/'right') of joint `index` of a joint vector."""
+        return SIDES[index // self.leg_joints]
+
+    @property
+    def absent_roles(self) -> tuple[str, ...]:
+        """The leg roles this robot lacks (declared in the leg map's `absent_roles`)."""
+        present = {j.role for j in self.legs["left"].joints}
+        return tuple(r for r in LEG_ROLES if r not in present)
+
     def to_dict(self, mjcf_relative_to: Path | None = None) -> dict:
         key = "mjcf" if self.urdf is None else "urdf"
         model = self.model_file
@@ -118,6 +146,8 @@ class LegMap:
             if leg.ft is not None:
                 ld["ft"] = leg.ft.to_dict()
             d["legs"][side] = ld
+        if self.absent_roles:
+            d["absent_roles"] = list(self.absent_roles)
         if self.held_joints_rad:
             d["held_joints_rad"] = dict(self.held_joints_rad)
         if self.servo_gains:
@@ -175,7 +205,7 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
                           "or 'urdf' (a URDF file)" + (", not both" if "mjcf" in data else ""))
     unknown = set(data) - {
         "schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad",
-        "held_joints_rad", "servo_gains",
+        "held_joints_rad", "servo_gains", "absent_roles",
     }
     if unknown:
         raise LegMapError(f"{where}: unknown fields {sorted(unknown)} (see docs/leg-map.md)")
@@ -189,6 +219,11 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
     legs_d = data["legs"]
     if not isinstance(legs_d, dict) or set(legs_d) != set(SIDES):
         raise LegMapError(f"{where}: field 'legs' must have exactly the keys 'left' and 'right'")
+    absent = data.get("absent_roles", []) or []
+    if not isinstance(absent, list) or not set(absent) <= set(ABSENT_ALLOWED):
+        raise LegMapError(f"{where}: absent_roles: {absent!r}; the roles a leg may lack are {list(ABSENT_ALLOWED)} "
+                          "(a leg needs three hip joints, a knee and an ankle pitch to stand and be calibrated)")
+    expected_roles = tuple(r for r in LEG_ROLES if r not in absent)
     legs = {}
     for side in SIDES:
         ld = legs_d[side]
@@ -198,13 +233,14 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
                 raise LegMapError(f"{lw}: missing field '{key}'")
         joints_d = ld["joints"]
         if not isinstance(joints_d, list):
-            raise LegMapError(f"{lw}.joints: list the leg's 6 joints from pelvis to foot, "
+            raise LegMapError(f"{lw}.joints: list the leg's joints from pelvis to foot, "
                               f"each as {{name: ..., role: ...}}")
-        if len(joints_d) != 6:
+        if len(joints_d) != len(expected_roles):
             raise LegMapError(
-                f"{lw}.joints: {len(joints_d)} joints listed; legcal-bench models legs of 6 joints (three hip "
-                "joints, knee, ankle pitch, ankle roll, pelvis to foot)" + (
-                    "; a leg without one of them (e.g. no ankle roll) is not supported yet" if len(joints_d) < 6
+                f"{lw}.joints: {len(joints_d)} joints listed; this leg map describes legs of {len(expected_roles)} "
+                f"joints ({', '.join(expected_roles)} from pelvis to foot, the three hip joints in any order)" + (
+                    "; a leg without one of these joints (e.g. no ankle roll) declares it with "
+                    "absent_roles: [ankle_roll]" if len(joints_d) < len(expected_roles)
                     else "; list only the leg's own joints (hold the others with held_joints_rad)"))
         joints = []
         for i, jd in enumerate(joints_d):
@@ -214,10 +250,10 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
                 raise LegMapError(f"{lw}.joints[{i}].role: {jd['role']!r} is not one of {list(LEG_ROLES)}")
             joints.append(Joint(str(jd["name"]), str(jd["role"])))
         roles = [j.role for j in joints]
-        if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != ["knee", "ankle_pitch", "ankle_roll"]:
+        if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != list(expected_roles[3:]):
             raise LegMapError(
-                f"{lw}.joints: roles must be the three hip joints (any order), then knee, "
-                f"ankle_pitch, ankle_roll, from pelvis to foot; got {roles}")
+                f"{lw}.joints: roles must be the three hip joints (any order), then "
+                f"{', '.join(expected_roles[3:])}, from pelvis to foot; got {roles}")
         corners_d = ld["corners"]
         if not isinstance(corners_d, dict) or set(corners_d) != set(CORNER_NAMES):
             raise LegMapError(f"{lw}.corners: give the four sole corners {list(CORNER_NAMES)} "
@@ -229,8 +265,8 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         raise LegMapError(f"{where}: left and right legs have different hip orderings "
                           f"{legs['left'].hip_order} vs {legs['right'].hip_order}")
     names = [j.name for s in SIDES for j in legs[s].joints]
-    if len(set(names)) != 12:
-        raise LegMapError(f"{where}: the 12 leg joint names must be distinct; got {names}")
+    if len(set(names)) != len(names):
+        raise LegMapError(f"{where}: the {len(names)} leg joint names must be distinct; got {names}")
     held = data.get("held_joints_rad", {}) or {}
     if not isinstance(held, dict):
         raise LegMapError(f"{where}: field 'held_joints_rad' must map joint names to angles in radians")
@@ -243,7 +279,7 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         raise LegMapError(f"{where}: field 'servo_gains' must map leg joint names to [kp, kd]")
     for k in gains:
         if k not in names:
-            raise LegMapError(f"{where}: servo_gains.{k} is not one of the 12 leg joints")
+            raise LegMapError(f"{where}: servo_gains.{k} is not one of the leg joints")
     urdf = None
     if kind == "urdf":
         sites = [f for f, spec in [("imu", data["imu"])] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES

@@ -51,10 +51,14 @@ def a3_dict():
     (lambda d: d.pop("pelvis"), "missing field 'pelvis'"),
     (lambda d: d.update(mjcf="nowhere.xml"), "field 'mjcf' points to"),
     (lambda d: d["legs"]["left"]["joints"][0].update(role="hip_twist"), "legs.left.joints[0].role"),
-    (lambda d: d["legs"]["left"]["joints"].pop(), "legs.left.joints: 5 joints listed; legcal-bench models legs of "
-                                                   "6 joints"),
+    (lambda d: d["legs"]["left"]["joints"].pop(), "legs.left.joints: 5 joints listed; this leg map describes legs "
+                                                   "of 6 joints"),
+    (lambda d: d["legs"]["left"]["joints"].pop(), "declares it with absent_roles: [ankle_roll]"),
+    (lambda d: d.update(absent_roles=["ankle_roll"]), "legs.left.joints: 6 joints listed; this leg map describes "
+                                                      "legs of 5 joints"),
+    (lambda d: d.update(absent_roles=["knee"]), "absent_roles: ['knee']; the roles a leg may lack are"),
     (lambda d: d["legs"]["left"]["joints"].append({"name": "toe", "role": "knee"}), "7 joints listed"),
-    (lambda d: d["legs"]["left"].update(joints="all of them"), "list the leg's 6 joints"),
+    (lambda d: d["legs"]["left"].update(joints="all of them"), "list the leg's joints from pelvis to foot"),
     (lambda d: d["legs"]["left"]["corners"].pop("toe_left"), "legs.left.corners"),
     (lambda d: d.update(servo_gains={"waist": [1, 2]}), "servo_gains.waist"),
     (lambda d: d["legs"]["right"].update(sole={"site": "x", "body": "y"}), "exactly one of 'site"),
