@@ -63,9 +63,9 @@ def _limits(design: LegDesign, role: str, side: str) -> tuple[float, float]:
 def _chain(design: LegDesign) -> tuple[list[str], list]:
     """The leg's roles from pelvis to foot and each chain slot's origin in its parent
     (left leg; `_mirror` for the right)."""
-    roles = list(design.hip_order) + ["knee", "ankle_pitch", "ankle_roll"]
-    assert sorted(roles) == sorted(LEG_ROLES)
-    return roles, [design.hip_origin, *design.hip_slot_offsets, design.thigh, design.shin, design.ankle_gap]
+    roles = list(design.roles)
+    assert set(roles) | set(design.absent_roles) == set(LEG_ROLES)
+    return roles, [design.hip_origin, *design.hip_slot_offsets, design.thigh, design.shin, design.ankle_gap][:len(roles)]
 
 
 class _Foot(NamedTuple):
@@ -79,12 +79,12 @@ class _Foot(NamedTuple):
 
 def _foot(design: LegDesign, side: str) -> _Foot:
     """The foot of `side`: sole frame, mass properties, corners, collision box."""
-    sole = np.asarray(_mirror(design.sole_offset, side))
+    sole = np.asarray(_mirror(design.foot_sole_offset, side))
     hl, hw = design.sole_half
     t = design.sole_thickness
     corners = {"toe_left": (hl, hw, 0.0), "toe_right": (hl, -hw, 0.0),
                "heel_left": (-hl, hw, 0.0), "heel_right": (-hl, -hw, 0.0)}
-    return _Foot(sole, (sole + [0, 0, t]).round(6), np.round(_box_inertia(design.masses[5], (hl, hw, t)), 9), corners,
+    return _Foot(sole, (sole + [0, 0, t]).round(6), np.round(_box_inertia(design.foot_mass, (hl, hw, t)), 9), corners,
                  (sole + [0, 0, t / 2]).round(6), (hl, hw, t / 2))
 
 
@@ -133,7 +133,8 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
         parent = pelvis
         joints = []
         for slot, role in enumerate(roles):
-            name = "foot" if role == "ankle_roll" else role
+            last = slot == len(roles) - 1
+            name = "foot" if last else role
             body = parent.add("body", name=f"{side}_{name}_link", pos=list(_mirror(slot_pos[slot], side)))
             jname = f"{side}_{role}_joint"
             body.add("joint", name=jname, axis=list(design.axis(role, side)), range=list(_limits(design, role, side)))
@@ -141,7 +142,7 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
             servo = design.servos[role]
             m.actuator.add("position", name=f"{side}_{role}", joint=jname, kp=servo.kp, kv=servo.kv,
                            forcelimited="true", forcerange=[-servo.torque_limit, servo.torque_limit])
-            if role != "ankle_roll":
+            if not last:
                 child = _mirror(slot_pos[slot + 1], side)
                 _link_inertial(body, design.masses[slot], child)
                 if np.linalg.norm(child) > 0.05:
@@ -151,7 +152,7 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
         foot = parent
         f = _foot(design, side)
         sole_pos, corners = f.sole, f.corners
-        foot.add("inertial", pos=f.com.tolist(), mass=design.masses[5], diaginertia=f.inertia.tolist())
+        foot.add("inertial", pos=f.com.tolist(), mass=design.foot_mass, diaginertia=f.inertia.tolist())
         foot.add("geom", name=f"{side}_sole_geom", type="box", size=list(f.box_half), pos=f.box.tolist(),
                  rgba=(0.25, 0.25, 0.3, 1), friction=[1.0, 0.02, 0.001], condim=6)
         ft = FrameSpec(site=f"{side}_ft")
@@ -249,13 +250,13 @@ def build_urdf(design: LegDesign) -> tuple[str, LegMap]:
     for side in SIDES:
         parent, joints = "pelvis", []
         for slot, role in enumerate(roles):
-            name = f"{side}_{'foot' if role == 'ankle_roll' else role}_link"
-            if role != "ankle_roll":
+            name = f"{side}_{'foot' if slot == len(roles) - 1 else role}_link"
+            if slot < len(roles) - 1:
                 link(name, round(design.masses[slot], 6),
                      *_rod_inertia(design.masses[slot], _mirror(slot_pos[slot + 1], side)))
             else:
                 f = _foot(design, side)
-                collision = ET.SubElement(link(name, design.masses[5], f.com, f.inertia), "collision")
+                collision = ET.SubElement(link(name, design.foot_mass, f.com, f.inertia), "collision")
                 ET.SubElement(collision, "origin", xyz=num(f.box), rpy="0 0 0")
                 ET.SubElement(ET.SubElement(collision, "geometry"), "box", size=num(2 * np.asarray(f.box_half)))
             jname = f"{side}_{role}_joint"

@@ -101,6 +101,25 @@ class LegDesign:
     # Hip roll and yaw axes canted by this angle (rad) about the pelvis y axis, both
     # legs: x -> (cos, 0, -sin), z -> (sin, 0, cos).
     hip_cant: float = 0.0
+    # Roles the leg does not have ("ankle_roll": a leg of five joints whose foot hangs
+    # from the ankle pitch, at the same place, with the ankle link's mass).
+    absent_roles: tuple[str, ...] = ()
+
+    @property
+    def roles(self) -> tuple[str, ...]:
+        """The leg's roles from pelvis to foot."""
+        return tuple(r for r in self.hip_order + ("knee", "ankle_pitch", "ankle_roll") if r not in self.absent_roles)
+
+    @property
+    def foot_sole_offset(self) -> Vec3:
+        """The sole centre in the foot body (the last joint's body)."""
+        if "ankle_roll" not in self.absent_roles:
+            return self.sole_offset
+        return tuple(a + b for a, b in zip(self.ankle_gap, self.sole_offset))  # type: ignore[return-value]
+
+    @property
+    def foot_mass(self) -> float:
+        return self.masses[5] + (self.masses[4] if "ankle_roll" in self.absent_roles else 0.0)
 
     def axis(self, role: str, side: str) -> Vec3:
         """The joint axis of `role` on `side`, in its body's frame (= the pelvis frame
@@ -200,9 +219,11 @@ GENERATED: tuple[LegDesign, ...] = tuple(
 
 # Robots as third parties build them (issue #37), each one change from A3-like: right-leg
 # pitch servos mounted mirrored; hip roll and yaw axes canted 45 degrees; a kid-size
-# robot (0.3 m legs, ~3 kg, servos scaled with it) with mirrored pitch servos.
+# robot (0.3 m legs, ~3 kg, servos scaled with it) with mirrored pitch servos; legs of
+# five joints (no ankle roll: the foot hangs from the ankle pitch).
 VARIATIONS: tuple[LegDesign, ...] = (
     replace(A3, name="a3_mirrored_pitch", flipped_axes=PITCH_ROLES),
     replace(A3, name="a3_canted_hips", hip_cant=0.7853981633974483),
     replace(A3.scaled("kid_size", length=0.321, mass=0.055), flipped_axes=PITCH_ROLES),
+    replace(A3, name="five_joint", absent_roles=("ankle_roll",)),
 )

@@ -3,7 +3,13 @@
 Every pose here is relative to the pelvis (base) frame B, so the floating base never
 matters: T_BF(q) is the sole pose in the pelvis frame, and the inter-foot transform is
 C(q) = T_BFL(q)^-1 T_BFR(q), the pose of the right sole in the left-sole frame.
-`q` is always the 12-vector of leg angles in leg-map order (left then right).
+`q` is always the vector of leg angles in leg-map order (left leg, then right): 12 for
+legs of six joints, 10 for legs of five (no ankle roll).
+
+A leg of six joints reaches any nearby sole pose, so in double support any pelvis pose
+near the stance is a posture. A leg of five reaches only a five-dimensional family of
+sole poses: each leg then constrains the pelvis by one equation, and of a commanded
+pelvis pose only its nearest reachable pose can be held (`reachable_postures`).
 
 Two paths compute the same kinematics:
 
@@ -30,8 +36,8 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 
 from legcal_bench.errors import IKError, LegMapError
-from legcal_bench.geometry.lie import Log, inverse
-from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose
+from legcal_bench.geometry.lie import Jr_inv, Log, adjoint, inverse
+from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose, posture_poses
 from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS, ROLE_AXIS_NAME
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 
@@ -61,10 +67,10 @@ class LegPoE:
     column). `cols[k]` is the column of q (0..11) that drives chain joint k.
     """
 
-    M: np.ndarray  # (6, 4, 4)
-    S: np.ndarray  # (6, 6)
+    M: np.ndarray  # (k, 4, 4), k the leg's joints
+    S: np.ndarray  # (k, 6)
     M_sole: np.ndarray  # (4, 4)
-    cols: np.ndarray  # (6,) int
+    cols: np.ndarray  # (k,) int
 
 
 def _hat(S: np.ndarray) -> np.ndarray:
@@ -115,9 +121,11 @@ class LegKinematics:
             raise LegMapError(f"Pinocchio could not load {legmap.model_file}: {e}") from None
         m = self.model
         self.q_neutral = pin.neutral(m)
-        self.leg_q_idx = np.empty(12, dtype=int)
-        self.leg_v_idx = np.empty(12, dtype=int)
-        self.leg_joint_ids = np.empty(12, dtype=int)
+        n = self.n_joints = legmap.n_joints
+        self.leg_joints = legmap.leg_joints
+        self.leg_q_idx = np.empty(n, dtype=int)
+        self.leg_v_idx = np.empty(n, dtype=int)
+        self.leg_joint_ids = np.empty(n, dtype=int)
         for i, name in enumerate(legmap.joint_names):
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: leg joint '{name}' is not in {legmap.model_file}")
@@ -138,11 +146,11 @@ class LegKinematics:
                          if all(legmap.legs[s].ft is not None for s in SIDES) else {})
         self.data = m.createData()
         self.corners = {s: np.array([legmap.legs[s].corners[c] for c in legmap.legs[s].corners]) for s in SIDES}
-        self.leg_cols = {"left": np.arange(6), "right": np.arange(6, 12)}
+        self.leg_cols = {s: np.arange(n)[legmap.leg_slice(s)] for s in SIDES}
         lower = m.lowerPositionLimit[self.leg_q_idx]
         upper = m.upperPositionLimit[self.leg_q_idx]
         finite = np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
-        self.limited = finite  # (12,) False: the model gives the joint no range (searched within +-pi)
+        self.limited = finite  # (n,) False: the model gives the joint no range (searched within +-pi)
         self.q_lower = np.where(finite, lower, -np.pi)
         self.q_upper = np.where(finite, upper, np.pi)
         knees = [i for i, r in enumerate(legmap.joint_roles) if r == "knee"]
@@ -197,7 +205,7 @@ class LegKinematics:
         if moves[self.imu_frame]:
             raise LegMapError(f"{src}: the IMU is moved by leg joints {sorted(m.names[j] for j in moves[self.imu_frame])}; "
                               "it must be on the pelvis or the upper body")
-        q0 = self.q_full(np.zeros(12))
+        q0 = self.q_full(np.zeros(self.n_joints))
         pin.computeJointJacobians(m, d, q0)
         pin.updateFramePlacements(m, d)
         oMB = d.oMf[self.pelvis_frame]
@@ -211,10 +219,10 @@ class LegKinematics:
             foreign = sorted(m.names[j] for j in on_chain - set(int(j) for j in ids))
             if missing or foreign:
                 raise LegMapError(f"{src}: legs.{s}: the joints between the pelvis and the {s} sole must be that "
-                                  f"leg's six joints (not on the chain: {missing}; from another leg: {foreign})")
+                                  f"leg's {len(cols)} joints (not on the chain: {missing}; from another leg: {foreign})")
             order = np.argsort([support.index(int(j)) for j in ids])  # chain order, pelvis to foot
             chain_ids, chain_cols = [int(j) for j in ids[order]], cols[order]
-            M, S = np.empty((6, 4, 4)), np.empty((6, 6))
+            M, S = np.empty((len(cols), 4, 4)), np.empty((len(cols), 6))
             prev = oMB
             for k, (jid, c) in enumerate(zip(chain_ids, chain_cols)):
                 M[k] = prev.actInv(d.oMi[jid]).homogeneous
@@ -226,7 +234,7 @@ class LegKinematics:
             poe[s] = LegPoE(M, S, M_sole, chain_cols)
         # Pinocchio stays the reference: the chains must reproduce it (e.g. a joint whose
         # motion is not the exponential of a constant twist would not).
-        q_test = 0.3 * np.sin(np.arange(1, 13) * 1.7) + 0.2
+        q_test = 0.3 * np.sin(np.arange(1, self.n_joints + 1) * 1.7) + 0.2
         T_poe = self._poe_poses(poe, q_test)
         pin.framesForwardKinematics(m, d, self.q_full(q_test))
         for i, s in enumerate(SIDES):
@@ -243,7 +251,7 @@ class LegKinematics:
         for s in SIDES:
             c = poe[s]
             T = np.eye(4)
-            for k in range(6):
+            for k in range(len(c.cols)):
                 scale, screw, X = _screw_terms(c.S[k])
                 t = scale * q[c.cols[k]]
                 f = (1.0, np.sin(t), 1 - np.cos(t), t - np.sin(t)) if screw else (1.0, t, 0.0, 0.0)
@@ -255,25 +263,26 @@ class LegKinematics:
         """Constants of the batched path, which runs on the inverse chain. With
         exp(S q) = sum_i f_i(theta) X_i (`_screw_terms`), A_k^-1 = exp(-S_k q_k) M_k^-1
         = sum_i f_i(-theta) X_i M_k^-1 (the last joint's with M_sole^-1 in front), so all
-        twelve A_k^-1 of N frames are one product of (2, 6, 16, 4) constants with the
-        (2, 6, 4, N) coefficients."""
-        A_inv = np.empty((2, 6, 4, 4, 4))  # side, chain joint, term, 4x4
-        scale, screw = np.empty((2, 6)), np.empty((2, 6), dtype=bool)
-        K = np.zeros((2, 6, 6, 4, 4))
+        A_k^-1 of N frames are one product of (2, k, 16, 4) constants with the (2, k, 4, N)
+        coefficients (k the joints per leg)."""
+        nk = self.leg_joints
+        A_inv = np.empty((2, nk, 4, 4, 4))  # side, chain joint, term, 4x4
+        scale, screw = np.empty((2, nk)), np.empty((2, nk), dtype=bool)
+        K = np.zeros((2, nk, 6, 4, 4))
         for i, s in enumerate(SIDES):
             c = self.poe[s]
-            for k in range(6):
+            for k in range(nk):
                 scale[i, k], screw[i, k], X = _screw_terms(c.S[k])
                 A_inv[i, k] = X @ np.linalg.inv(c.M[k])
                 for r in range(3):  # [R v, R w] = K @ H.ravel() for a 4x4 H with rotation R
                     K[i, k, r, r, :3] = c.S[k, :3]
                     K[i, k, 3 + r, r, :3] = c.S[k, 3:]
-            A_inv[i, 5] = np.linalg.inv(c.M_sole) @ A_inv[i, 5]
-        self._A_inv = A_inv.reshape(2, 6, 4, 16).transpose(0, 1, 3, 2).copy()  # (2, 6, 16 entries, 4 terms)
-        self._K = K.reshape(2, 6, 6, 16)
+            A_inv[i, -1] = np.linalg.inv(c.M_sole) @ A_inv[i, -1]
+        self._A_inv = A_inv.reshape(2, nk, 4, 16).transpose(0, 1, 3, 2).copy()  # (2, k, 16 entries, 4 terms)
+        self._K = K.reshape(2, nk, 6, 16)
         self._M_sole_inv = np.array([np.linalg.inv(self.poe[s].M_sole) for s in SIDES])
         self._scale, self._screw = scale, screw
-        self._chain_cols = np.array([self.poe[s].cols for s in SIDES])  # (2, 6) columns of q
+        self._chain_cols = np.array([self.poe[s].cols for s in SIDES])  # (2, k) columns of q
         # Column k of a leg's LOCAL sole Jacobian sits at position _jac_pos[k] (leg-map order).
         self._jac_pos = np.array([self.poe[s].cols - self.leg_cols[s][0] for s in SIDES])
         self._prismatic = [np.flatnonzero(~screw[i]) for i in range(2)]
@@ -291,18 +300,18 @@ class LegKinematics:
         return buf[:size].reshape(shape)
 
     def _chain_block(self, Q: np.ndarray, sides: list[int], jacobian: bool):
-        """Both (or one) legs' kinematics for the rows of Q (n <= _CHUNK, 12), with the
+        """Both (or one) legs' kinematics for the rows of Q (n <= _CHUNK, n_joints), with the
         frame index last (4x4 matrices as (4, 4, n)) so each step is a few long vector
         operations. Returns scratch views, valid until the next call: T^-1
         (n_sides, 4, 4, n), the inverse sole poses in the pelvis frame, and (with
-        `jacobian`) Y (n_sides, 6, 6, n), Y[s, k] the LOCAL sole Jacobian column of chain
-        joint k (leg-map column `_jac_pos[s, k]`)."""
-        ns, n = len(sides), len(Q)
+        `jacobian`) Y (n_sides, k, 6, n), Y[s, j] the LOCAL sole Jacobian column of chain
+        joint j (leg-map column `_jac_pos[s, j]`), k the joints per leg."""
+        ns, n, nk = len(sides), len(Q), self.leg_joints
         w = self._work
-        theta = w("theta", (ns, 6, n))
+        theta = w("theta", (ns, nk, n))
         np.negative(Q[:, self._chain_cols[sides]].transpose(1, 2, 0), out=theta)  # the inverse chain: -q
         theta *= self._scale[sides][..., None]
-        F = w("F", (ns, 6, 4, n))  # exp(S theta) = sum_i F_i X_i
+        F = w("F", (ns, nk, 4, n))  # exp(S theta) = sum_i F_i X_i
         F[:, :, 0] = 1.0
         np.sin(theta, out=F[:, :, 1])
         np.cos(theta, out=F[:, :, 2])
@@ -311,34 +320,34 @@ class LegKinematics:
         for i, s in enumerate(sides):
             for k in self._prismatic[s]:
                 F[i, k, 1], F[i, k, 2:] = theta[i, k], 0.0
-        A_inv = w("A_inv", (ns, 6, 16, n))
+        A_inv = w("A_inv", (ns, nk, 16, n))
         np.matmul(self._A_inv[sides], F, out=A_inv)  # A_k^-1 = exp(-S_k q_k) M_k^-1
-        A_inv = A_inv.reshape(ns, 6, 4, 4, n)
-        # D_k = B_k^-1, where B_k = A_{k+1} ... A_5 is joint k's frame -> sole:
-        # D_5 = M_sole^-1, D_{k-1} = D_k A_k^-1, and T^-1 = D_0 A_0^-1.
-        D = w("D", (ns, 6, 4, 4, n))
-        D[:, 5] = self._M_sole_inv[sides][..., None]
-        D[:, 4] = A_inv[:, 5]
-        for k in range(4, 0, -1):
+        A_inv = A_inv.reshape(ns, nk, 4, 4, n)
+        # D_k = B_k^-1, where B_k = A_{k+1} ... A_last is joint k's frame -> sole:
+        # D_last = M_sole^-1, D_{k-1} = D_k A_k^-1, and T^-1 = D_0 A_0^-1.
+        D = w("D", (ns, nk, 4, 4, n))
+        D[:, nk - 1] = self._M_sole_inv[sides][..., None]
+        D[:, nk - 2] = A_inv[:, nk - 1]
+        for k in range(nk - 2, 0, -1):
             _mul_soa(D[:, k], A_inv[:, k], D[:, k - 1])
         T_inv = _mul_soa(D[:, 0], A_inv[:, 0], w("T_inv", (ns, 4, 4, n)))
         if not jacobian:
             return T_inv, None
         # Column k of the LOCAL Jacobian: Ad(D_k) S_k = [R v + p x (R w), R w], (R, p) of D_k.
-        Y = w("Y", (ns, 6, 6, n))
-        np.matmul(self._K[sides], D.reshape(ns, 6, 16, n), out=Y)  # [R v, R w]
+        Y = w("Y", (ns, nk, 6, n))
+        np.matmul(self._K[sides], D.reshape(ns, nk, 16, n), out=Y)  # [R v, R w]
         _add_cross(D[:, :, :3, 3], Y[:, :, 3:], Y[:, :, :3])
         return T_inv, Y
 
     def _legs_batch(self, Q: np.ndarray, sides: tuple[int, ...] = (0, 1), jacobian: bool = True):
         """Sole poses (n_sides, N, 4, 4) in the pelvis frame and, with `jacobian`, LOCAL
-        sole Jacobians (n_sides, N, 6, 6) w.r.t. the leg's joints in leg-map order, for
-        the rows of Q (N, 12)."""
+        sole Jacobians (n_sides, N, 6, k) w.r.t. the leg's k joints in leg-map order, for
+        the rows of Q (N, n_joints)."""
         Q = np.asarray(Q, dtype=float)
         sides = list(sides)
         n = len(Q)
         T = np.empty((len(sides), n, 4, 4))
-        J = np.empty((len(sides), n, 6, 6)) if jacobian else None
+        J = np.empty((len(sides), n, 6, self.leg_joints)) if jacobian else None
         for a in range(0, n, self._CHUNK):
             b = min(a + self._CHUNK, n)
             T_inv, Y = self._chain_block(Q[a:b], sides, jacobian)
@@ -350,7 +359,7 @@ class LegKinematics:
 
     def sole_poses_batch(self, Q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(T_BFL, T_BFR), each (N, 4, 4): the sole poses in the pelvis frame for each row
-        of Q (N, 12), batched (`sole_poses` for one posture)."""
+        of Q (N, n_joints), batched (`sole_poses` for one posture)."""
         T, _ = self._legs_batch(np.atleast_2d(Q), jacobian=False)
         return T[0], T[1]
 
@@ -383,7 +392,7 @@ class LegKinematics:
     def T_BI(self) -> np.ndarray:
         """(4, 4) pose of the (nominal) IMU frame in the pelvis frame. The IMU is on no leg
         (checked when the model is loaded), so it does not depend on the leg angles."""
-        return self.imu_pose(np.zeros(12)).homogeneous
+        return self.imu_pose(np.zeros(self.n_joints)).homogeneous
 
     @cached_property
     def T_sole_ft(self) -> dict[str, np.ndarray]:
@@ -393,7 +402,7 @@ class LegKinematics:
         if not self.ft_frame:
             raise LegMapError(f"{self.legmap.source or self.legmap.name}: no ankle force/torque frames (legs.<side>.ft)")
         m, d = self.model, self.data
-        pin.framesForwardKinematics(m, d, self.q_full(np.zeros(12)))
+        pin.framesForwardKinematics(m, d, self.q_full(np.zeros(self.n_joints)))
         out = {}
         for s in SIDES:
             if m.frames[self.ft_frame[s]].parentJoint != m.frames[self.sole_frame[s]].parentJoint:
@@ -415,19 +424,19 @@ class LegKinematics:
         return self.data.oMf[self.pelvis_frame].actInv(c)
 
     def joint_axes(self, q: np.ndarray | None = None) -> np.ndarray:
-        """(12, 3) leg joint axes in the pelvis frame (at q, default all zeros)."""
-        qf = self.q_full(np.zeros(12) if q is None else q)
+        """(n_joints, 3) leg joint axes in the pelvis frame (at q, default all zeros)."""
+        qf = self.q_full(np.zeros(self.n_joints) if q is None else q)
         pin.computeJointJacobians(self.model, self.data, qf)
         pin.updateFramePlacements(self.model, self.data)
         R_B = self.data.oMf[self.pelvis_frame].rotation
-        axes = np.empty((12, 3))
+        axes = np.empty((self.n_joints, 3))
         for i, name in enumerate(self.legmap.joint_names):
             J = pin.getJointJacobian(self.model, self.data, self.model.getJointId(name), pin.WORLD)
             axes[i] = R_B.T @ J[3:, self.leg_v_idx[i]]
         return axes
 
     def role_axes(self) -> tuple[np.ndarray, np.ndarray]:
-        """(signs (12,), angles (12,) rad) of each leg joint's axis at zero angles against
+        """(signs (n_joints,), angles (n_joints,) rad) of each leg joint's axis at zero angles against
         its role's pelvis axis (`ROLE_AXIS`: pitch y, roll x, yaw z): +1 where they point
         the same way, -1 where the axis points the other way (a joint mirrored by design:
         a positive angle turns the leg the other way about the pelvis axis); the angle
@@ -444,13 +453,13 @@ class LegKinematics:
         return np.where(cos < 0, -1.0, 1.0), np.arccos(np.clip(np.abs(cos), 0.0, 1.0))
 
     def physical_signs(self) -> np.ndarray:
-        """(12,) +-1: each joint's angle sign against its role's pelvis axis
+        """(n_joints,) +-1: each joint's angle sign against its role's pelvis axis
         (`role_axes`). A role's offset times its sign is the same physical rotation on
         every robot and on both legs, mirrored axes or not (the paper's presets)."""
         return self.role_axes()[0]
 
     def pitch_signs(self) -> np.ndarray:
-        """(12,) +-1 for hip pitch, knee and ankle pitch: each axis's direction relative to
+        """(n_joints,) +-1 for hip pitch, knee and ankle pitch: each axis's direction relative to
         the pelvis y axis, one frame for both legs (a common pitch of the pelvis, such as
         an IMU tilt, moves both legs' pitch sums alike, mirrored axes or not); 0 for the
         other joints."""
@@ -458,14 +467,14 @@ class LegKinematics:
         return np.where(pitch, self.physical_signs(), 0.0)
 
     def sole_jacobian(self, side: str, q: np.ndarray) -> np.ndarray:
-        """6x6 Jacobian of the sole pose in its own (local) frame w.r.t. that leg's joints."""
+        """(6, k) Jacobian of the sole pose in its own (local) frame w.r.t. that leg's k joints."""
         qf = self.q_full(q)
         J = pin.computeFrameJacobian(self.model, self.data, qf, self.sole_frame[side], pin.LOCAL)
         return J[:, self.leg_v_idx[self.leg_cols[side]]]
 
     # ---------------------------------------------------------------- inverse
     def solve_leg(self, side: str, T_B_sole: pin.SE3, q_init: np.ndarray, max_iter: int = 50) -> np.ndarray:
-        """Newton IK for one leg: the 12-vector `q_init` with that leg's joints solved."""
+        """Newton IK for one leg: the joint vector `q_init` with that leg's joints solved."""
         q = np.array(q_init, dtype=float)
         cols = self.leg_cols[side]
         frame = self.sole_frame[side]
@@ -500,8 +509,8 @@ class LegKinematics:
     def solve_batch(self, T_B_left: np.ndarray, T_B_right: np.ndarray, q_init: np.ndarray | None = None,
                     check_limits: bool = True, max_iter: int = 50) -> np.ndarray:
         """`solve` for N targets at once: T_B_left, T_B_right (N, 4, 4) sole poses in the
-        pelvis frame (or sequences of pin.SE3), q_init (N, 12) or (12,) (default
-        `q_init()`); returns (N, 12).
+        pelvis frame (or sequences of pin.SE3), q_init (N, n_joints) or (n_joints,)
+        (default `q_init()`); returns (N, n_joints).
 
         Each frame runs `solve_leg`'s Newton iteration (error log6(T^-1 T_target) in the
         sole frame, least-squares step on the LOCAL sole Jacobian, at most 0.5 rad a
@@ -513,7 +522,7 @@ class LegKinematics:
         if len(targets[1]) != n:
             raise ValueError(f"solve_batch: {n} left but {len(targets[1])} right sole poses")
         q0 = self.q_init() if q_init is None else np.asarray(q_init, dtype=float)
-        q = np.array(np.broadcast_to(q0, (n, 12)), dtype=float)
+        q = np.array(np.broadcast_to(q0, (n, self.n_joints)), dtype=float)
         for i, side in enumerate(SIDES):
             residual = self._newton_batch(i, targets[i], q, max_iter)
             failed = np.flatnonzero(residual > 1e-9)
@@ -556,7 +565,7 @@ class LegKinematics:
     def q_init(self) -> np.ndarray:
         """A mildly bent-knee seed in the middle of the joint ranges (IK starting point):
         the knee bent forward physically, a mirrored axis's angle signed accordingly."""
-        q = np.clip(np.zeros(12), self.q_lower, self.q_upper)
+        q = np.clip(np.zeros(self.n_joints), self.q_lower, self.q_upper)
         roles, signs = self.legmap.joint_roles, self._role_axes[0]
         for i, r in enumerate(roles):
             bend = signs[i] * {"hip_pitch": -0.3, "knee": 0.6, "ankle_pitch": -0.3}.get(r, 0.0)
@@ -565,7 +574,7 @@ class LegKinematics:
 
     @cached_property
     def dims(self) -> RobotDims:
-        left, right = self.sole_poses(np.zeros(12))
+        left, right = self.sole_poses(np.zeros(self.n_joints))
         c = self.corners["left"]
         return RobotDims(
             leg_length=float(-(left.translation[2] + right.translation[2]) / 2),
@@ -577,7 +586,7 @@ class LegKinematics:
 
 
 def joint_limits(legmap: LegMap) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) of the 12 leg joints (rad), as `LegKinematics` reads them."""
+    """(lower, upper) of the leg joints (rad), as `LegKinematics` reads them."""
     kin = LegKinematics(legmap)
     return kin.q_lower, kin.q_upper
 
@@ -599,18 +608,22 @@ def _ik_error(message: str, frames: np.ndarray) -> IKError:
 
 
 def _lstsq_batch(J: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise np.linalg.lstsq(J[k], b[k], rcond=None)[0] for square J: a plain solve
+    """Row-wise np.linalg.lstsq(J[k], b[k], rcond=None)[0]: for square J a plain solve
     where J[k] is well conditioned; where the solve fails or amplifies b by more than
-    1e6 (relative to |J|), the minimum-norm solution through the SVD with singular
-    values below eps * max(m, n) * s_max dropped (lstsq's rule)."""
-    try:
-        x = np.linalg.solve(J, b[..., None])[..., 0]
-        amplified = np.linalg.norm(x, axis=1) * np.linalg.norm(J, axis=(1, 2)) > 1e6 * np.linalg.norm(b, axis=1)
-        bad = ~np.isfinite(x).all(axis=1) | amplified
-    except np.linalg.LinAlgError:  # an exactly singular J somewhere
-        x, bad = np.empty_like(b), np.ones(len(b), dtype=bool)
+    1e6 (relative to |J|), and for a non-square J (a leg of five joints), the
+    minimum-norm least-squares solution through the SVD with singular values below
+    eps * max(m, n) * s_max dropped (lstsq's rule)."""
+    square = J.shape[-1] == J.shape[-2]
+    x, bad = np.empty(J.shape[:-2] + J.shape[-1:]), np.ones(len(b), dtype=bool)
+    if square:
+        try:
+            x = np.linalg.solve(J, b[..., None])[..., 0]
+            amplified = np.linalg.norm(x, axis=1) * np.linalg.norm(J, axis=(1, 2)) > 1e6 * np.linalg.norm(b, axis=1)
+            bad = ~np.isfinite(x).all(axis=1) | amplified
+        except np.linalg.LinAlgError:  # an exactly singular J somewhere
+            pass
     if bad.any():
-        U, s, Vt = np.linalg.svd(J[bad])
+        U, s, Vt = np.linalg.svd(J[bad], full_matrices=square)
         cutoff = np.finfo(float).eps * max(J.shape[-2:]) * s[:, :1]
         inv_s = np.where(s > cutoff, 1.0 / np.where(s > cutoff, s, 1.0), 0.0)
         x[bad] = np.einsum("nji,nj->ni", Vt, inv_s * np.einsum("nji,nj->ni", U, b[bad]))
@@ -646,38 +659,153 @@ def solve_standing(kin: LegKinematics, T_W_left: pin.SE3, T_W_right: pin.SE3, po
                    knee_angles: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
     """Closed-chain posture with both knees held at given angles (straight-leg standing).
 
-    With a knee fixed each leg keeps five joints, so the pelvis height and roll are
-    freed: twelve unknowns for the twelve sole-pose equations. Returns (posture, q).
+    With a knee fixed a leg of six joints keeps five, so the pelvis height and roll are
+    freed: twelve unknowns for the twelve sole-pose equations. A leg of five joints
+    keeps four: the rest of the pelvis pose is freed too, pulled weakly (1e-6 per m of
+    leg, per rad) toward `posture0`, which decides only what the equations leave open.
+    Returns (posture, q).
     """
     roles = kin.legmap.joint_roles
+    n = kin.n_joints
     knees = [i for i, r in enumerate(roles) if r == "knee"]
-    others = [i for i in range(12) if i not in knees]
+    others = [i for i in range(n) if i not in knees]
+    free = [2, 3] if 2 + len(others) >= 12 else list(range(6))  # posture entries solved for
+    pull = np.r_[np.full(3, 1 / kin.dims.leg_length), np.ones(3)] * 1e-6
 
     def unpack(u):
         posture = np.array(posture0, dtype=float)
-        posture[2], posture[3] = u[0], u[1]
-        q = np.empty(12)
+        posture[free] = u[:len(free)]
+        q = np.empty(n)
         q[knees] = knee_angles
-        q[others] = u[2:]
+        q[others] = u[len(free):]
         return posture, q
 
     def residual(u):
         posture, q = unpack(u)
         T_WB = posture_pose(posture)
         left, right = kin.sole_poses(q)
-        return np.concatenate([pin.log6((T_WB * left).actInv(T_W_left)).vector,
-                               pin.log6((T_WB * right).actInv(T_W_right)).vector])
+        r = [pin.log6((T_WB * left).actInv(T_W_left)).vector, pin.log6((T_WB * right).actInv(T_W_right)).vector]
+        if len(free) == 6:
+            r.append(pull * (posture - posture0))
+        return np.concatenate(r)
 
     # Seed: the bent-knee IK solution at the starting posture, knees then snapped.
     seed = np.array(posture0, dtype=float)
     seed[2] -= 0.03 * kin.dims.leg_length  # straight legs are singular; start bent
-    T_WB = posture_pose(seed)
-    q0 = kin.solve(T_WB.actInv(T_W_left), T_WB.actInv(T_W_right), check_limits=False)
-    u0 = np.concatenate([[seed[2], seed[3]], q0[others]])
+    if len(free) == 6:
+        (seed,), q0 = reachable_postures(kin, T_W_left, T_W_right, seed[None])
+        q0 = q0[0]
+    else:
+        T_WB = posture_pose(seed)
+        q0 = kin.solve(T_WB.actInv(T_W_left), T_WB.actInv(T_W_right), check_limits=False)
+    u0 = np.concatenate([seed[free], q0[others]])
     sol = least_squares(residual, u0, xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
-    if np.linalg.norm(sol.fun) > 1e-10:
-        raise IKError(f"no straight-leg standing posture for these sole placements (residual {np.linalg.norm(sol.fun):.1e})")
+    feet = np.linalg.norm(sol.fun[:12])
+    if feet > 1e-10:
+        raise IKError(f"no straight-leg standing posture for these sole placements (residual {feet:.1e})")
     return unpack(sol.x)
+
+
+# How a commanded pelvis pose is weighed against a reachable one (`reachable_postures`):
+# a translation counts per leg length, a rotation per radian.
+def _pose_metric(kin: LegKinematics) -> np.ndarray:
+    return np.r_[np.full(3, 1.0 / kin.dims.leg_length), np.ones(3)]
+
+
+# `reachable_postures`: the closure's weight against the pose metric in its least squares
+# (per rad or m of inter-foot error), and the least-squares iterations at most.
+CLOSURE_WEIGHT = 1e3
+REACH_MAX_STEPS = 100
+
+
+def reachable_postures(kin: LegKinematics, T_W_left: pin.SE3 | np.ndarray, T_W_right: pin.SE3 | np.ndarray,
+                       postures: np.ndarray, q_init: np.ndarray | None = None,
+                       tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+    """(postures (N, 6), q (N, n)): for each commanded pelvis posture (stance frame), a
+    nearby one from which both legs reach their soles at T_W_left/T_W_right (stance
+    frame), and its joint angles. Legs of six joints reach every posture near a stance:
+    the postures come back as commanded. A leg of k < 6 joints reaches a k-dimensional
+    family of sole poses, so the postures of both legs form a (2k - 6)-dimensional family
+    (four for k = 5), and at flat parallel soles a singular one: the pelvis roll of a
+    five-joint robot is free to first order (hip rolls and knees take it) and bound only
+    at second order (the hips' spacing shrinks with its cosine), where the closure's
+    Jacobian loses a rank.
+
+    Solved in joint space: the pelvis follows the left leg, T_WB = T_W_left T_BL(q)^-1,
+    and the right sole must close the chain, C(q) = C_target (`frame_kinematics`'s
+    inter-foot transform and Jacobian G). Levenberg-Marquardt on the pelvis pose's
+    departure from the commanded one (translation per leg length, rotation per rad:
+    `_pose_metric`) and the closure error weighted by CLOSURE_WEIGHT (a penalty, which
+    the singular roll does not break as an equality constraint's multipliers would),
+    then Gauss-Newton on the closure alone until it is below `tol`. Raises IKError naming
+    the frames that do not close. Joint limits are not checked here (`solve_batch` on
+    the result does)."""
+    P = np.atleast_2d(np.asarray(postures, dtype=float))
+    n = len(P)
+    T_cmd = posture_poses(P)
+    S_L, S_R = (_homogeneous(X)[0] for X in (T_W_left, T_W_right))
+    C_target = np.linalg.solve(S_L, S_R)
+    W = _pose_metric(kin)
+    if q_init is None:  # seed: the left leg's least-squares IK for the commanded pose
+        q_init = np.broadcast_to(kin.q_init(), (n, kin.n_joints)).copy()
+        kin._newton_batch(0, inverse(T_cmd) @ S_L, q_init, 20)
+    q = np.array(np.broadcast_to(q_init, (n, kin.n_joints)), dtype=float)
+    left = kin.leg_cols["left"]
+
+    def residuals(q):
+        fk = frame_kinematics(kin, q)
+        T_BL = np.zeros((len(q), 4, 4))
+        T_BL[:, :3, :3], T_BL[:, :3, 3], T_BL[:, 3, 3] = fk.R_L, fk.p_L, 1.0
+        r = Log(inverse(fk.C) @ C_target)  # closure error; G dq = r closes it to first order
+        d0 = Log(inverse(T_cmd) @ S_L @ inverse(T_BL))  # the pelvis pose against the commanded one
+        jac = np.zeros((len(q), 12, kin.n_joints))
+        # dq_L moves the pelvis by xi = -Ad(T_BL) J_L dq_L, the departure by Jr^-1(d0) xi.
+        jac[:, :6, left] = -(W[:, None] * Jr_inv(d0)) @ adjoint(T_BL) @ fk.J_L
+        jac[:, 6:] = -CLOSURE_WEIGHT * fk.G
+        return np.concatenate([W * d0, CLOSURE_WEIGHT * r], axis=1), jac, fk.G, r
+
+    res, jac, _, _ = residuals(q)
+    cost = np.einsum("ni,ni->n", res, res)
+    lam = np.full(n, 1e-3)
+    for _ in range(REACH_MAX_STEPS):
+        JtJ = np.swapaxes(jac, 1, 2) @ jac
+        g = np.einsum("nji,nj->ni", jac, res)
+        damped = JtJ + (lam[:, None, None] * np.eye(kin.n_joints)) * np.einsum("nii->ni", JtJ)[:, None, :]
+        step = -np.linalg.solve(damped + 1e-300 * np.eye(kin.n_joints), g[..., None])[..., 0]
+        step *= np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))[:, None]  # <= 0.5 rad
+        res_t, jac_t, _, _ = residuals(q + step)
+        cost_t = np.einsum("ni,ni->n", res_t, res_t)
+        better = cost_t < cost
+        q[better] += step[better]
+        res[better], jac[better], cost[better] = res_t[better], jac_t[better], cost_t[better]
+        lam = np.where(better, np.maximum(lam / 3, 1e-12), lam * 4)
+        if np.abs(step).max() < 1e-13 or (lam > 1e12).all():
+            break
+    closure = np.full(n, np.inf)
+    for _ in range(60):  # the closure alone; the singular roll converges by halving
+        _, _, G, r = residuals(q)
+        closure = np.linalg.norm(r, axis=1)
+        if closure.max() < tol:
+            break
+        q += _lstsq_batch(G, r)
+    failed = np.flatnonzero(closure >= max(tol, 1e-9))
+    if failed.size:
+        raise _ik_error(f"no reachable posture near {failed.size} of {n} commanded ones (largest closure error "
+                        f"{closure[failed].max():.2e})", failed)
+    return _postures_of(S_L @ inverse(_left_poses(kin, q))), q
+
+
+def _left_poses(kin: LegKinematics, q: np.ndarray) -> np.ndarray:
+    """(N, 4, 4) the left sole's poses in the pelvis frame."""
+    return kin._legs_batch(q, (0,), jacobian=False)[0][0]
+
+
+def _postures_of(T: np.ndarray) -> np.ndarray:
+    """(N, 6) posture vectors [x, y, z, roll, pitch, yaw] of pelvis poses (N, 4, 4): the
+    inverse of `posture_poses` (fixed axes x, y, z)."""
+    from scipy.spatial.transform import Rotation
+
+    return np.concatenate([T[:, :3, 3], Rotation.from_matrix(T[:, :3, :3]).as_euler("xyz")], axis=1)
 
 
 # A joint's axis this far from its role's pelvis axis is reported (`axis_warnings`): the
@@ -702,7 +830,8 @@ def axis_warnings(kin: LegKinematics) -> list[str]:
 def pitch_sums(dq: np.ndarray, signs: np.ndarray) -> dict[str, float]:
     """Per-leg pitch sums s_L, s_R and s_R - s_L of an offset vector (`signs` from
     `LegKinematics.pitch_signs`)."""
-    left, right = float(signs[:6] @ dq[:6]), float(signs[6:] @ dq[6:])
+    h = len(dq) // 2  # the left leg's joints, then the right's
+    left, right = float(signs[:h] @ dq[:h]), float(signs[h:] @ dq[h:])
     return {"left": left, "right": right, "right_minus_left": right - left}
 
 
@@ -711,25 +840,26 @@ class FrameKinematics:
     """Per-frame kinematics (batched arrays) of N leg configurations."""
 
     C: np.ndarray  # (N, 4, 4) inter-foot transforms, homogeneous
-    G: np.ndarray  # (N, 6, 12) right-perturbation Jacobian of C w.r.t. the 12 leg angles
+    G: np.ndarray  # (N, 6, n) right-perturbation Jacobian of C w.r.t. the n leg angles
     p_L: np.ndarray  # (N, 3) sole positions in the pelvis frame
     p_R: np.ndarray
     R_L: np.ndarray  # (N, 3, 3) sole rotations in the pelvis frame
     R_R: np.ndarray
-    J_L: np.ndarray  # (N, 6, 6) local sole Jacobians w.r.t. the leg's own joints
+    J_L: np.ndarray  # (N, 6, k) local sole Jacobians w.r.t. the leg's own k joints
     J_R: np.ndarray
 
 
 def frame_kinematics(kin: LegKinematics, Q: np.ndarray) -> FrameKinematics:
-    """Forward kinematics and sole Jacobians for each row of Q (N, 12), all frames at
+    """Forward kinematics and sole Jacobians for each row of Q (N, n), all frames at
     once on the legs' products of exponentials (`LegPoE`).
 
     A right perturbation of the sole poses, T_BF(q + d) = T_BF Exp(J_F d), perturbs C
     on the right by G d with G = [-Ad(C^-1) J_L | J_R]."""
     Q = np.atleast_2d(np.asarray(Q, dtype=float))
     n = len(Q)
-    T, C, G = np.empty((2, n, 4, 4)), np.empty((n, 4, 4)), np.empty((n, 6, 12))
-    J = np.empty((2, n, 6, 6))
+    nk = kin.leg_joints
+    T, C, G = np.empty((2, n, 4, 4)), np.empty((n, 4, 4)), np.empty((n, 6, 2 * nk))
+    J = np.empty((2, n, 6, nk))
     pos_L, pos_R = kin._jac_pos
     w = kin._work
     for a in range(0, n, kin._CHUNK):
@@ -742,11 +872,11 @@ def frame_kinematics(kin: LegKinematics, Q: np.ndarray) -> FrameKinematics:
         C[a:b] = _mul_soa(T_inv[0], Tb[1], w("C", Tb.shape[1:])).transpose(2, 0, 1)
         # -Ad(C^-1) J_L, column by column: -[R a + p x (R b), R b] with (R, p) of C^-1.
         C_inv = _mul_soa(T_inv[1], Tb[0], w("C_inv", Tb.shape[1:]))
-        AdJ = w("AdJ", Y.shape[1:])  # (6 joints, 6, n)
+        AdJ = w("AdJ", Y.shape[1:])  # (k joints, 6, n)
         np.einsum("ijn,kjn->kin", C_inv[:3, :3], Y[0, :, :3], out=AdJ[:, :3])
         np.einsum("ijn,kjn->kin", C_inv[:3, :3], Y[0, :, 3:], out=AdJ[:, 3:])
         _add_cross(C_inv[None, :3, 3], AdJ[:, 3:], AdJ[:, :3])
         G[a:b, :, pos_L] = -AdJ.transpose(2, 1, 0)
-        G[a:b, :, 6 + pos_R] = Y[1].transpose(2, 1, 0)
+        G[a:b, :, nk + pos_R] = Y[1].transpose(2, 1, 0)
     TL, TR = T
     return FrameKinematics(C, G, TL[:, :3, 3], TR[:, :3, 3], TL[:, :3, :3], TR[:, :3, :3], J[0], J[1])

@@ -257,7 +257,7 @@ def test_legs_must_be_chains_from_the_pelvis(testbot_legmap, tmp_path):
         left, right = lm["legs"]["left"]["joints"], lm["legs"]["right"]["joints"]
         left[3]["name"], right[3]["name"] = right[3]["name"], left[3]["name"]
 
-    with pytest.raises(LegMapError, match="must be that leg's six joints"):
+    with pytest.raises(LegMapError, match="must be that leg's 6 joints"):
         LegKinematics(_variant(testbot_legmap, tmp_path, edit_legmap=swap_knees))
 
     def imu_on_shin(lm):

@@ -1,5 +1,6 @@
 """The robot variations third parties build (issue #37: mirrored pitch servos, hips
-canted 45 degrees, a kid-size robot with 0.3 m legs), each through its leg map alone:
+canted 45 degrees, a kid-size robot with 0.3 m legs, legs of five joints), each through
+its leg map alone:
 collected at zero noise with the paper's offsets (the same physical pattern on each),
 the default calibration recovers them to 1e-9 deg with no data-check warning."""
 
@@ -21,7 +22,8 @@ from legcal_bench.sim.offsets import resolve_offsets
 
 def test_the_variations_are_what_they_say(tmp_path):
     kin = {d.name: LegKinematics(load_robot(str(write_robot(d, tmp_path)))) for d in VARIATIONS}
-    assert set(kin) == {"a3_mirrored_pitch", "a3_canted_hips", "kid_size"}
+    assert set(kin) == {"a3_mirrored_pitch", "a3_canted_hips", "kid_size", "five_joint"}
+    assert kin["five_joint"].legmap.absent_roles == ("ankle_roll",) and kin["five_joint"].n_joints == 10
     assert kin["kid_size"].dims.leg_length == pytest.approx(0.30, abs=0.005)
     for name in ("a3_mirrored_pitch", "kid_size"):
         assert (kin[name].physical_signs() < 0).sum() == 3  # the right leg's hip pitch, knee, ankle pitch
