@@ -135,7 +135,7 @@ class InterFootCalibrator(Calibrator):
 
         # First solve, trim the largest residual frames, solve again.
         t1 = time.perf_counter()
-        dq, hist1, hist2 = problem.solve_trimmed(np.zeros(12), self.options)
+        dq, hist1, hist2 = problem.solve_trimmed(np.zeros(robot.n_joints), self.options)
         t_solve = time.perf_counter() - t1
         t_contact = time.perf_counter()
         contacts, dropped = None, []
@@ -192,7 +192,8 @@ class InterFootCalibrator(Calibrator):
                 + ". Record several stances with varied postures (hip roll and yaw excitation).")
         signs = kin.pitch_signs()
         if gls is not None:
-            post = posterior(gls.Jw[:, :12].T @ gls.Jw[:, :12], robot.joint_names, robot.joint_roles, signs)
+            Jq = gls.Jw[:, :robot.n_joints]
+            post = posterior(Jq.T @ Jq, robot.joint_names, robot.joint_roles, signs)
         else:
             post = noise_posterior(prep, problem, dq, signs)
         if post is not None:

@@ -1,7 +1,7 @@
 """Yamane's sole-height calibrator (Yamane 2011), as the paper reimplemented it.
 
 Unknowns: one root (pelvis) orientation per frame, of which only roll and pitch are
-free (neither term sees yaw), and one shared 12-vector of offsets dq. Per frame k:
+free (neither term sees yaw), and one shared vector of offsets dq (one per leg joint). Per frame k:
 
   IMU term     w_imu (R_k^T e_z - u_k)               u_k: the IMU's up vector in the pelvis frame
   sole term    w_h (z_kv - mean_v z_kv), v = 1..8    z_kv = e_z^T R_k p_v(q_k + dq): the heights of
@@ -14,11 +14,11 @@ well-posed, and its weight decides how the method ranks.
 
 Both terms (`legcal_bench.estimation.problem.terms.SoleHeightTerm`, `ImuTiltTerm`) go into one
 `legcal_bench.estimation.problem.problem.Problem` with a shared offsets block and a per-frame
-tilt block, so the Jacobian is block-sparse (2 unknowns per frame + 12 shared), handed
+tilt block, so the Jacobian is block-sparse (2 unknowns per frame + the shared offsets), handed
 to scipy's trust-region solver as a sparse matrix (LSMR inner solves) with
 `solver="sparse"`; the default, `solver="projected"`, eliminates the per-frame tilts by
 variable projection (each frame's roll and pitch solved for the current offsets, then LM
-on the 12 offsets with the projected Jacobian), three times faster here. The information
+on the offsets with the projected Jacobian), three times faster here. The information
 on the offsets has the per-frame tilts eliminated (Schur complement).
 
 Weights: `weights="default"` uses w_h = 1000 /m and w_imu = 1000 /rad (1 mm of height
@@ -50,7 +50,7 @@ from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
 
-# "projected": the per-frame roll and pitch eliminated by variable projection, LM on the 12
+# "projected": the per-frame roll and pitch eliminated by variable projection, LM on the
 # offsets (default); "sparse": all unknowns jointly, trust region with LSMR steps. Both
 # reach the same optimum (to ~1e-9 rad, the cost's flatness in its weak directions).
 SOLVERS = {"projected": "projected", "sparse": "trf"}
@@ -87,7 +87,7 @@ class YamaneCalibrator(Calibrator):
     def _weights(self, recordings: list[Recording], kin: LegKinematics) -> tuple[float, float]:
         w_h, w_imu = 1000.0, 1000.0
         if self.weights == "sensor":
-            s = noise_sigmas(recordings[0].sensor_model, kin.dims.leg_length)
+            s = noise_sigmas(recordings[0].sensor_model, kin.dims.leg_length, kin.legmap.leg_joints)
             if s is not None:
                 w_h, w_imu = 1.0 / s["height"], 1.0 / s["tilt"]
         return (w_h if self.w_h_opt is None else float(self.w_h_opt)), \
@@ -118,7 +118,7 @@ class YamaneCalibrator(Calibrator):
         # Start each root orientation at the IMU's tilt: up = R^T e_z.
         roll0 = np.arctan2(up[:, 1], up[:, 2])
         pitch0 = np.arctan2(-up[:, 0], np.hypot(up[:, 1], up[:, 2]))
-        problem = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
+        problem = Problem([Block(OFFSETS, robot.n_joints, bound=self.bound), Block(TILT, 2, per_frame=True)],
                           [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(up, w_imu)])
         x0 = problem.pack({TILT: np.column_stack([roll0, pitch0])})
         t1 = time.perf_counter()
@@ -130,11 +130,11 @@ class YamaneCalibrator(Calibrator):
                         "eigenvalues_H_data": w.tolist()}
         # Posterior: the same rows divided by their declared noise, per-frame tilts eliminated.
         signs = kin.pitch_signs()
-        sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length)
+        sig = noise_sigmas(stances[0].sensor_model, kin.dims.leg_length, robot.leg_joints)
         warnings: list[str] = filter_warnings(reports)
         post = None
         if sig is not None:
-            whitened = Problem([Block(OFFSETS, 12, bound=self.bound), Block(TILT, 2, per_frame=True)],
+            whitened = Problem([Block(OFFSETS, robot.n_joints, bound=self.bound), Block(TILT, 2, per_frame=True)],
                                [SoleHeightTerm(kin, Q, 1.0 / sig["height"]), ImuTiltTerm(up, 1.0 / sig["tilt"])])
             post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
             warnings += uncertainty_warnings(post)
@@ -143,7 +143,7 @@ class YamaneCalibrator(Calibrator):
         dr = np.zeros((n, 11, 2))
         for axis in range(2):
             dr[:, 8:, axis] = -w_imu * np.cross(np.eye(3)[axis], up)
-        tilt_response = problem.shared_response(sol.x, dr.reshape(-1, 2))[:12]
+        tilt_response = problem.shared_response(sol.x, dr.reshape(-1, 2))[:robot.n_joints]
         warnings += imu_tilt_warnings(tilt_response, stances[0].sensor_model.tilt_bound, signs)
         warnings += bound_warnings(dq, self.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)

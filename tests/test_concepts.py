@@ -17,7 +17,7 @@ CONCEPTS = [
     ("the injection vector by role", r"INJECTION_RAD\[", "legcal_bench/sim/offsets.py"),
     ("the paper's operating weights", r"lambda_g\s*=\s*(10|100)(\.0)?\b", "legcal_bench/paper.py"),
     ("the flat-ground height row", r"p_L\s*-\s*[\w.]*p_R|translation\s*-\s*\w+\.translation", "legcal_bench/estimation/problem/residuals.py"),
-    ("the IMU frame at zero pose", r"imu_pose\(np\.zeros\(12\)\)", "legcal_bench/robots/kinematics.py"),
+    ("the IMU frame at zero pose", r"imu_pose\(np\.zeros\((12|self\.n_joints)\)\)", "legcal_bench/robots/kinematics.py"),
     ("an RMS", r"np\.sqrt\(np\.mean\(", "legcal_bench/evaluation/metrics.py"),
     ("the pitch roles", r"""\(\s*["']hip_pitch["']\s*,\s*["']knee["']\s*,\s*["']ankle_pitch["']\s*\)""", "legcal_bench/robots/design.py"),
     ("a robot label from a leg-map path", r"""replace\(\s*["']\.legmap\.yaml""", None),

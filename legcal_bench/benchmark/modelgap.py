@@ -508,7 +508,7 @@ def markdown(data: dict, made_by: str, code: str) -> str:
          f"Made by `{made_by}` ({code}). Weld (clean_kinematic: the kinematic floor), `calibrated-imu`, the paper's "
          f"injection; {who} "
          "then `legcal_bench.evaluation.modelgap.diagnose`. Library magnitudes drawn per seed in realistic ranges "
-         "(`library_spec`); offsets: RMS error of the 12 offsets (deg), offsets-only vs after the diagnosis.", "",
+         "(`library_spec`); offsets: RMS error of the offsets (deg), offsets-only vs after the diagnosis.", "",
          "| robot | case | seeds | detected | correct / no effect claimed | wrong confident | offsets before | after "
          "| floor | after/floor | verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in data["summary"]:

@@ -165,9 +165,9 @@ def context(robot, recordings, prep: Prepared | None = None) -> Context:
 
 
 def _offsets_sigma(ev: Evaluated) -> np.ndarray:
-    """Noise-only standard deviations of the 12 offsets (the offsets-only model)."""
+    """Noise-only standard deviations of the offsets (the offsets-only model)."""
     H = ev.Jw.T @ ev.Jw
-    return np.sqrt(np.diag(np.linalg.pinv(H))[:12])
+    return np.sqrt(np.diag(np.linalg.pinv(H))[:ev.fit.model.n_offsets])
 
 
 def _cv(ev: Evaluated) -> tuple[float, int]:
@@ -222,10 +222,11 @@ def _confounds_each(ctx: Context, names, dq0: np.ndarray) -> dict:
     prep = ctx.prep
     model = effect_model(prep.kin, tuple(names), prep.segments)
     dq0 = np.asarray(dq0, dtype=float)
-    start = ModelFit(tuple(names), model, np.r_[dq0, np.zeros(model.n - 12)], dq0, (), None, prep.segments)
+    start = ModelFit(tuple(names), model, np.r_[dq0, np.zeros(model.n - model.n_offsets)], dq0, (), None,
+                     prep.segments)
     _, J, _ = whitened_rows(prep, start)
     for e in model.effects:
-        one = confound_report(np.concatenate([J[:, :12], J[:, model.slices[e.name]]], axis=1),
+        one = confound_report(np.concatenate([J[:, :model.n_offsets], J[:, model.slices[e.name]]], axis=1),
                               EffectModel(prep.kin, [e]), prep.robot.joint_names)
         out["effects"].update(one["effects"])
         out["held"] += one["held"]
@@ -257,6 +258,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     names = list(robot.joint_names)
     say("offsets-only fit")
     base_fit = fit_model(ctx.prep, start=start)
+    n_q = base_fit.model.n_offsets  # the offsets' columns (one per leg joint) lead every model's
     base = evaluate(ctx, base_fit, ctx.prep.segments, keep_frames=True)
     sigma0 = _offsets_sigma(base)
     ln_n = float(np.log(base.n_rows))
@@ -278,7 +280,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     if not significant:
         notes.append("selection not run: the offsets-only model explains these data within the declared noise")
     # What these data cannot separate, per candidate, whether or not selection runs.
-    for c in _confound_entries(_confounds_each(ctx, tried, base_fit.x[:12])):
+    for c in _confound_entries(_confounds_each(ctx, tried, base_fit.x[:n_q])):
         confounded.setdefault(c["effect"], c)
     while significant and len(selected) < MAX_EFFECTS:
         rows = []
@@ -286,11 +288,11 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
             if name in selected:
                 continue
             say(f"fit + {name}")
-            fit = fit_model(ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:12])
+            fit = fit_model(ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:n_q])
             ev = evaluate(ctx, fit, ctx.prep.segments, keep_frames=True)  # the frames: a kept one is traced
             k = ev.k - current.k
             d = current.chi2 - ev.chi2
-            move = np.abs(fit.x[:12] - current_fit.x[:12]) / sigma0
+            move = np.abs(fit.x[:n_q] - current_fit.x[:n_q]) / sigma0
             rows.append({"effect": name, "fit": fit, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
                          "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
                          "max_offset_move_sigmas": float(move.max()),
@@ -351,7 +353,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         cov = np.linalg.pinv(final.Jw.T @ final.Jw)
         std = np.full(model.n, np.nan)
         std[free] = np.sqrt(np.diag(cov))
-        for i in range(12, model.n):
+        for i in range(n_q, model.n):
             params[model.names[i]] = {"value": float(current_fit.x[i]), "std": float(std[i]),
                                       "unit": model.units[i], "held": model.names[i] in current_fit.held}
     report = {
@@ -369,11 +371,11 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                   "poor_fit": "residual left significant and a leg or IMU location test on it at family-wise alpha"},
         "steps": steps,
         "parameters": params,
-        "offsets_only_rad": dict(zip(names, map(float, base_fit.x[:12]))),
+        "offsets_only_rad": dict(zip(names, map(float, base_fit.x[:n_q]))),
         # The offsets the diagnosis recommends: with the selected effects; the offsets-only
         # fit's when none is kept (a poor fit's own offsets are kept apart).
-        "offsets_rad": dict(zip(names, map(float, (current_fit if selected else base_fit).x[:12]))),
-        "poor_fit_offsets_rad": dict(zip(names, map(float, current_fit.x[:12]))) if partial else None,
+        "offsets_rad": dict(zip(names, map(float, (current_fit if selected else base_fit).x[:n_q]))),
+        "poor_fit_offsets_rad": dict(zip(names, map(float, current_fit.x[:n_q]))) if partial else None,
         "offsets_noise_std_rad": dict(zip(names, map(float, sigma0))),
         "tracing": tracing,
         "tracing_after": tracing_after,
@@ -449,7 +451,7 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
             continue
         C = whiten(joint_columns(fr.G, v))
         per = []
-        for j in range(12):
+        for j in range(len(names)):
             d, dof = score_beyond(zr, Qn, C[:, [j]], ctx.resolution)
             per.append({"joint": names[j], "delta_chi2": d, "dof": dof, "excess": d - dof,
                         "log10_p": _log10_sf(d, dof)})

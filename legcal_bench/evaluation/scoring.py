@@ -37,7 +37,7 @@ from legcal_bench.sim.sensors import ImuErrors
 
 
 def _errors_at(kin: LegKinematics, q: np.ndarray, up_B: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Foot-height differences (m) and sole-normal angles (rad, (N, 2)) at angles q (N, 12)."""
+    """Foot-height differences (m) and sole-normal angles (rad, (N, 2)) at angles q (N, n), n the leg joints."""
     return flat_ground_errors(frame_kinematics(kin, q), up_B)
 
 
@@ -47,16 +47,19 @@ NO_TRUTH = ("no ground truth (*.truth.npz) beside the recordings: recovery needs
 
 def _truths(paths, names: list[str]) -> dict:
     """The ground truth of each recording that has one, checked: every truth file must
-    load, match its recording's frames, and all must declare the same finite offsets."""
+    load, match its recording's frames, and all must declare the same finite offsets
+    (one per leg joint of `names`)."""
     truths = {}
+    n_joints = len(names)
     for p in paths:
         if not truth_path(p).is_file():
             continue
         t = load_truth(p)
         n = load_recording(p, names).n_frames
-        if np.shape(t.offsets) != (12,) or not np.isfinite(t.offsets).all():
-            raise RecordingError(f"{truth_path(p)}: field 'offsets' must be 12 finite numbers (radians)")
-        if np.shape(t.q_true) != (n, 12) or len(t.pelvis_pose_world) != n:
+        if np.shape(t.offsets) != (n_joints,) or not np.isfinite(t.offsets).all():
+            raise RecordingError(f"{truth_path(p)}: field 'offsets' must be {n_joints} finite numbers (radians), one "
+                                 "per leg joint")
+        if np.shape(t.q_true) != (n, n_joints) or len(t.pelvis_pose_world) != n:
             raise RecordingError(f"{truth_path(p)}: the ground truth has {len(t.q_true)} frames but its recording "
                                  f"{n}: it belongs to another recording (truncated or foreign); re-collect the set")
         truths[p] = t
@@ -78,9 +81,10 @@ def _imu_share(kin: LegKinematics, result: CalibrationResult, truths: dict) -> t
     if V is None or any(e is None for e in errors):
         return None
     V = np.asarray(V, dtype=float)
-    if V.shape != (12, 2) or not np.isfinite(V).all():
-        raise CalibrationError("diagnostics.imu_tilt_response must be 12 x 2 finite numbers (offsets per rad of IMU "
-                               "tilt about the pelvis x and y axes)")
+    n_joints = kin.legmap.n_joints
+    if V.shape != (n_joints, 2) or not np.isfinite(V).all():
+        raise CalibrationError(f"diagnostics.imu_tilt_response must be {n_joints} x 2 finite numbers (offsets per rad "
+                               "of IMU tilt about the pelvis x and y axes, one row per leg joint)")
     imu = ImuErrors.from_dict(errors[0])
     stance_up = [pos_quat_to_se3(x).rotation.T @ [0.0, 0.0, 1.0] for t in truths.values()
                  for x in t.pelvis_pose_world[::10]]
@@ -162,7 +166,7 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
 
 def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | None:
     """Held-out foot height RMS (mm) per estimate (label -> parameter vector x of the
-    model with `effects`: the 12 offsets, then the effects' parameters): the flat-ground
+    model with `effects`: the offsets, one per leg joint, then the effects' parameters): the flat-ground
     row p_Lz - p_Rz of the held-out recordings through the model at x. On the
     simulator's true postures and vertical where the recordings keep a ground truth
     ("true"), else on the logged encoders and the IMU-levelled vertical ("logged").
@@ -191,7 +195,7 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
         ft = None if rec.ft is None else smooth_wrenches(rec.time, rec.ft)
         for key, x in estimates.items():
             x = np.asarray(x, dtype=float)
-            seg = EffectSegment(model, SegmentData(q, ft, up, q_ref=q + x[:12]))
+            seg = EffectSegment(model, SegmentData(q, ft, up, q_ref=q + x[:model.n_offsets]))
             heights[key].append(foot_height_difference(seg.state(model.values(x)), up))
     if not kinds:
         return None

@@ -1,7 +1,8 @@
 """A leg's product of exponentials with extra factors: the kinematics of model-gap
 effects that change the robot's geometry (issue #16).
 
-A leg (`LegPoE`) is the product M_0 E_0 M_1 E_1 ... M_5 E_5 M_sole, E_k = exp(S_k q_k).
+A leg (`LegPoE`) is the product M_0 E_0 M_1 E_1 ... M_{k-1} E_{k-1} M_sole, E_j =
+exp(S_j q_j), k the leg's joints (6, or 5 without ankle roll).
 An effect inserts factors Exp(zeta) after any element, zeta = sum_i p_i g_i linear in
 its parameters p (generators g_i, (6,) twists [v, w] in the frame at that point):
 
@@ -28,7 +29,8 @@ from legcal_bench.robots.legmap import SIDES
 @dataclass(frozen=True)
 class Factor:
     """Exp(sum_i p[cols[i]] g[i]) inserted after element `after` of one leg's chain
-    (elements: 0 = M_0, 1 = E_0, 2 = M_1, ..., 11 = E_5; 12 = M_sole is last)."""
+    (elements: 0 = M_0, 1 = E_0, 2 = M_1, ..., 2k - 1 = E_{k-1}; 2k = M_sole is last,
+    k the leg's joints)."""
 
     side: str
     after: int
@@ -50,9 +52,9 @@ class FactorChain:
         self.poe = {s: kin.poe[s] for s in SIDES}
 
     def legs(self, Q: np.ndarray, p: np.ndarray):
-        """For the rows of Q (N, 12) and parameters p (n_params,): per side (T (N, 4, 4)
-        sole pose in the pelvis frame, Jq (N, 6, 6) LOCAL sole Jacobian w.r.t. the leg's
-        joints in leg-map order, Jp (N, 6, n_params) w.r.t. the parameters)."""
+        """For the rows of Q (N, n) and parameters p (n_params,): per side (T (N, 4, 4)
+        sole pose in the pelvis frame, Jq (N, 6, k) LOCAL sole Jacobian w.r.t. the leg's
+        k joints in leg-map order, Jp (N, 6, n_params) w.r.t. the parameters)."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         n = len(Q)
         out = {}
@@ -63,8 +65,9 @@ class FactorChain:
             for f in self.factors:
                 if f.side == s:
                     inserted.setdefault(f.after, []).append(f)
-            for e in range(13):
-                if e == 12:
+            nk = len(poe.cols)
+            for e in range(2 * nk + 1):
+                if e == 2 * nk:
                     elements.append(("const", poe.M_sole, None, None))
                 elif e % 2 == 0:
                     elements.append(("const", poe.M[e // 2], None, None))
@@ -82,7 +85,7 @@ class FactorChain:
                 B[i] = acc
                 acc = elements[i][1] @ acc
             T = acc
-            Jq = np.zeros((n, 6, 6))
+            Jq = np.zeros((n, 6, nk))
             Jp = np.zeros((n, 6, self.n_params))
             for i, (kind, _, what, payload) in enumerate(elements):
                 if kind != "exp":
@@ -90,7 +93,7 @@ class FactorChain:
                 AdB = adjoint(inverse(B[i]))
                 if what == "joint":
                     k = payload
-                    Jq[:, :, poe.cols[k] - 6 * s_i] = AdB @ poe.S[k]
+                    Jq[:, :, poe.cols[k] - nk * s_i] = AdB @ poe.S[k]
                 else:
                     f, zeta = payload
                     G = Jr(zeta) @ f.generators.T  # (6, P)

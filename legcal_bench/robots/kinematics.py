@@ -661,16 +661,17 @@ def solve_standing(kin: LegKinematics, T_W_left: pin.SE3, T_W_right: pin.SE3, po
 
     With a knee fixed a leg of six joints keeps five, so the pelvis height and roll are
     freed: twelve unknowns for the twelve sole-pose equations. A leg of five joints
-    keeps four: the rest of the pelvis pose is freed too, pulled weakly (1e-6 per m of
-    leg, per rad) toward `posture0`, which decides only what the equations leave open.
+    keeps four: the rest of the pelvis pose is freed too, pulled weakly (1e-6 of
+    `_pose_metric`) toward `posture0`, which decides only what the equations leave open.
     Returns (posture, q).
     """
     roles = kin.legmap.joint_roles
     n = kin.n_joints
     knees = [i for i, r in enumerate(roles) if r == "knee"]
     others = [i for i in range(n) if i not in knees]
-    free = [2, 3] if 2 + len(others) >= 12 else list(range(6))  # posture entries solved for
-    pull = np.r_[np.full(3, 1 / kin.dims.leg_length), np.ones(3)] * 1e-6
+    equations = 2 * 6  # both soles' poses
+    free = [2, 3] if 2 + len(others) >= equations else list(range(6))  # posture entries solved for
+    pull = 1e-6 * _pose_metric(kin)
 
     def unpack(u):
         posture = np.array(posture0, dtype=float)
@@ -700,7 +701,7 @@ def solve_standing(kin: LegKinematics, T_W_left: pin.SE3, T_W_right: pin.SE3, po
         q0 = kin.solve(T_WB.actInv(T_W_left), T_WB.actInv(T_W_right), check_limits=False)
     u0 = np.concatenate([seed[free], q0[others]])
     sol = least_squares(residual, u0, xtol=1e-15, ftol=1e-15, gtol=1e-15, max_nfev=200)
-    feet = np.linalg.norm(sol.fun[:12])
+    feet = np.linalg.norm(sol.fun[:equations])
     if feet > 1e-10:
         raise IKError(f"no straight-leg standing posture for these sole placements (residual {feet:.1e})")
     return unpack(sol.x)

@@ -1,7 +1,7 @@
 """Model-gap effects in the assembled problem (issue #16): each library effect's
 Jacobian (inter-foot and flat-ground rows, every block) against central differences at
 non-zero parameters, the extended kinematics against the plain path at zero, and the
-registry and its errors."""
+registry and its errors; on legs of six joints and of five (no ankle roll)."""
 
 import numpy as np
 import pytest
@@ -12,16 +12,22 @@ from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_bas
 from legcal_bench.estimation.problem.problem import Block, Problem
 from legcal_bench.estimation.problem.terms import OFFSETS, FlatGroundTerm, InterFootTerm, SegmentKinematics
 from legcal_bench.robots import load_robot
+from legcal_bench.robots.build import write_robot
+from legcal_bench.robots.design import VARIATIONS
 from legcal_bench.robots.kinematics import LegKinematics
 
 LIBRARY = ("leg_length", "encoder_scale", "compliance", "imu_tilt", "hip_axis")
 
 
-@pytest.fixture(scope="module", params=["a3", "a2"])
-def data(request):
-    kin = LegKinematics(load_robot(request.param))
+@pytest.fixture(scope="module", params=["a3", "a2", "five_joint"])
+def data(request, tmp_path_factory):
+    robot = request.param
+    if robot not in ("a3", "a2"):
+        design = next(d for d in VARIATIONS if d.name == robot)
+        robot = str(write_robot(design, tmp_path_factory.mktemp(robot)))
+    kin = LegKinematics(load_robot(robot))
     rng = np.random.default_rng(5)
-    q = kin.q_init() + rng.normal(0, 0.08, (15, 12))
+    q = kin.q_init() + rng.normal(0, 0.08, (15, kin.legmap.n_joints))
     acc = np.array([0.2, -0.3, 9.8]) + rng.normal(0, 0.2, (15, 3))
     ft = np.concatenate([rng.normal(0, 20, (15, 2, 3)) + [0, 0, -250], rng.normal(0, 5, (15, 2, 3))], axis=2)
     up = up_in_base(acc, kin.R_BI)
@@ -33,7 +39,7 @@ def _problem(kin, seg, up, effects):
     es = EffectSegment(model, seg)
     feet = InterFootTerm("feet", es, np.arange(1, 7.0), "projected")
     flat = FlatGroundTerm("flat", es, up, levelling_rotations(up), np.arange(1, 6.0) * 100)
-    blocks = [Block(OFFSETS, 12)] + [Block(n, k) for n, k in model.blocks]
+    blocks = [Block(OFFSETS, model.n_offsets)] + [Block(n, k) for n, k in model.blocks]
     return Problem(blocks, [feet, flat]), model
 
 
@@ -47,10 +53,11 @@ def test_the_library_is_registered_as_plug_ins():
 def test_each_effect_jacobian_matches_central_differences(data, effect):
     kin, seg, up = data
     problem, model = _problem(kin, seg, up, [effect])
+    n_q = model.n_offsets
     rng = np.random.default_rng(1)
-    x = np.r_[rng.normal(0, 0.02, 12), rng.normal(0, 1, model.n - 12) * _scale(effect)]
+    x = np.r_[rng.normal(0, 0.02, n_q), rng.normal(0, 1, model.n - n_q) * _scale(effect)]
     _, J = problem.evaluate(x)
-    h = 1e-6 * np.r_[np.ones(12), np.full(model.n - 12, _scale(effect))]
+    h = 1e-6 * np.r_[np.ones(n_q), np.full(model.n - n_q, _scale(effect))]
     fd = np.empty_like(J)
     for j in range(model.n):
         e = np.zeros(model.n)
@@ -68,11 +75,12 @@ def _scale(effect):
 def test_at_zero_parameters_the_extended_kinematics_is_the_plain_one(data):
     kin, seg, up = data
     problem, model = _problem(kin, seg, up, list(LIBRARY))
-    x = np.r_[np.full(12, 0.01), np.zeros(model.n - 12)]
+    n_q = model.n_offsets
+    x = np.r_[np.full(n_q, 0.01), np.zeros(model.n - n_q)]
     plain = SegmentKinematics(kin, seg.q_enc)
-    ref = Problem([Block(OFFSETS, 12)], [InterFootTerm("feet", plain, np.arange(1, 7.0), "projected"),
+    ref = Problem([Block(OFFSETS, n_q)], [InterFootTerm("feet", plain, np.arange(1, 7.0), "projected"),
                                         FlatGroundTerm("flat", plain, up, levelling_rotations(up),
                                                        np.arange(1, 6.0) * 100)])
-    r0, J0 = ref.evaluate(x[:12])
+    r0, J0 = ref.evaluate(x[:n_q])
     r1, J1 = problem.evaluate(x)
-    assert np.abs(r1 - r0).max() < 1e-12 and np.abs(J1[:, :12] - J0).max() < 1e-9
+    assert np.abs(r1 - r0).max() < 1e-12 and np.abs(J1[:, :n_q] - J0).max() < 1e-9

@@ -31,7 +31,7 @@ IMU_MODES = ("compensated", "raw")  # raw: the paper's setting, the acceleromete
 def imu_acceleration(kin: LegKinematics, time: np.ndarray, q: np.ndarray, window_s: float = IMU_WINDOW_S
                      ) -> np.ndarray:
     """(N, 3) the IMU's acceleration in the IMU frame (m/s^2) predicted from the leg angles
-    `q` (N, 12) at `time` (N,), feet fixed. Zero for recordings too short to smooth."""
+    `q` (N, n) (n: the leg joints) at `time` (N,), feet fixed. Zero for recordings too short to smooth."""
     time, q = np.asarray(time, dtype=float), np.asarray(q, dtype=float)
     n = len(time)
     if n < POLYORDER + 2:

@@ -6,8 +6,8 @@ vertical. If that vertical is off by a small rotation w (about the pelvis x and 
 axes: mounting tilt, or a horizontal accelerometer bias over g), the offsets that fit
 rotate both soles by w in the pelvis frame while keeping every inter-foot transform:
 on a pitch-first hip, equal hip-pitch offsets do exactly that (no static data separate
-them). `tilt_directions` returns that linear map, V (12, 2) with dq = V w, as the
-least-squares solution over the session's postures of
+them). `tilt_directions` returns that linear map, V (n, 2) with dq = V w (n the leg
+joints), as the least-squares solution over the session's postures of
 
     G_k dq = 0                          (inter-foot transforms unchanged, weighted)
     P_xy J_side,k dq_side = P_xy R_side,k^T w   (each sole rotated by w, its yaw free)
@@ -26,8 +26,8 @@ INTERFOOT_WEIGHT = 100.0  # per m (translation rows, times the leg length) and p
 
 
 def tilt_directions(kin: LegKinematics, Q: np.ndarray) -> np.ndarray:
-    """(12, 2) offsets per rad of IMU tilt about the pelvis x and y axes, for the
-    postures Q (N, 12)."""
+    """(n, 2) offsets per rad of IMU tilt about the pelvis x and y axes, for the
+    postures Q (N, n), n the leg joints."""
     fk = frame_kinematics(kin, Q)
     n = len(Q)
     L = kin.dims.leg_length
@@ -39,7 +39,7 @@ def tilt_directions(kin: LegKinematics, Q: np.ndarray) -> np.ndarray:
         rows.append(fk.G[k] * scale[:, None] * L)
         rhs.append(np.zeros((6, 2)))
         for side, J, R in (("left", fk.J_L[k], fk.R_L[k]), ("right", fk.J_R[k], fk.R_R[k])):
-            A = np.zeros((2, 12))
+            A = np.zeros((2, kin.legmap.n_joints))
             A[:, cols[side]] = J[3:5]
             rows.append(A)
             rhs.append(R.T[:2, :2])  # sole-frame x, y rotation for unit pelvis-frame x, y rotations

@@ -54,7 +54,7 @@ EVAL_STEP = 4  # information from every 4th frame, scaled back up (the motion is
 @dataclass
 class StanceInfo:
     stance: Stance  # as fitted to the robot
-    H: np.ndarray  # (12, 12) whitened information
+    H: np.ndarray  # (n, n) whitened information, n the leg joints
     motion_scale: float
 
 
@@ -109,7 +109,8 @@ def greedy_design(candidates: list[StanceInfo], k: int, accept: Callable[[int], 
         return verdict[j]
 
     chosen: list[int] = []
-    H = np.zeros((12, 12))
+    n = len(candidates[0].H) if candidates else 0
+    H = np.zeros((n, n))
     for _ in range(k):
         order = sorted((j for j in range(len(candidates)) if j not in chosen and verdict.get(j, True)),
                        key=lambda j: -_lambda_min(H + candidates[j].H))
@@ -142,7 +143,7 @@ def summary(kin: LegKinematics, H: np.ndarray) -> dict:
     signs = kin.pitch_signs()
     ps = {}
     for key in ("left", "right", "right_minus_left"):
-        a = np.array([pitch_sums(e, signs)[key] for e in np.eye(12)])
+        a = np.array([pitch_sums(e, signs)[key] for e in np.eye(kin.legmap.n_joints)])
         ps[key] = float(np.degrees(np.sqrt(a @ cov @ a)))
     return {"eigenvalues": w[:3].tolist(), "kappa": float(w[-1] / w[0]),
             "std_deg": dict(zip(kin.legmap.joint_names, np.degrees(np.sqrt(np.diag(cov))).tolist())),

@@ -30,19 +30,21 @@ class InformationGain:
 
     def __init__(self, kin: LegKinematics):
         self.kin = kin
+        self.n_joints = kin.legmap.n_joints
         self.reset()
 
     def reset(self) -> None:
         self.n = 0
-        self.sum_G = np.zeros((6, 12))
-        self.sum_GtG = np.zeros((12, 12))
-        self.H_flat = np.zeros((12, 12))
-        self.logdet = 12 * np.log(self.EPS)
+        n = self.n_joints
+        self.sum_G = np.zeros((6, n))
+        self.sum_GtG = np.zeros((n, n))
+        self.H_flat = np.zeros((n, n))
+        self.logdet = n * np.log(self.EPS)
 
     @property
     def H(self) -> np.ndarray:
         if self.n == 0:
-            return np.zeros((12, 12))
+            return np.zeros((self.n_joints, self.n_joints))
         return self.sum_GtG - self.sum_G.T @ self.sum_G / self.n + self.H_flat
 
     def add(self, q_enc: np.ndarray, imu_acc: np.ndarray) -> float:
@@ -54,6 +56,6 @@ class InformationGain:
         self.sum_G += G
         self.sum_GtG += G.T @ G
         self.H_flat += F.T @ F
-        new = np.linalg.slogdet(self.H + self.EPS * np.eye(12))[1]
+        new = np.linalg.slogdet(self.H + self.EPS * np.eye(self.n_joints))[1]
         gain, self.logdet = new - self.logdet, new
         return float(gain)

@@ -62,9 +62,9 @@ def analyze(J_data: np.ndarray, H_prior: np.ndarray, names: list[str], roles: li
         out["kappa_H_data_mean_recomputed"] = out["kappa_J_data_mean_recomputed"] ** 2
     scale = max(w_d[-1], 1e-300)
     out["unobservable_data"] = [describe_combination(V_d[:, i], names)
-                                for i in range(12) if w_d[i] < UNOBSERVABLE_RTOL * scale]
+                                for i in range(len(w_d)) if w_d[i] < UNOBSERVABLE_RTOL * scale]
     out["unobservable_reg"] = [describe_combination(V_r[:, i], names)
-                               for i in range(12) if w_r[i] < UNOBSERVABLE_RTOL * max(w_r[-1], 1e-300)]
+                               for i in range(len(w_r)) if w_r[i] < UNOBSERVABLE_RTOL * max(w_r[-1], 1e-300)]
     return out
 
 

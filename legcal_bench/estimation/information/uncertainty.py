@@ -23,10 +23,9 @@ BOUND_FRACTION = 0.99  # an offset this close to the bound ended at it
 
 def pitch_sum_vectors(signs: np.ndarray, roles: list[str]) -> dict[str, np.ndarray]:
     """Row vectors a with a . dq = each pitch sum (left, right) and right_minus_left."""
-    pitch = np.array([r in PITCH_ROLES for r in roles])
-    left, right = np.zeros(12), np.zeros(12)
-    left[:6] = np.where(pitch[:6], signs[:6], 0.0)
-    right[6:] = np.where(pitch[6:], signs[6:], 0.0)
+    pitch_signs = np.where(np.array([r in PITCH_ROLES for r in roles]), signs, 0.0)
+    sums = [pitch_sums(e, pitch_signs) for e in np.eye(len(roles))]  # each leg's columns as pitch_sums takes them
+    left, right = (np.array([s[key] for s in sums]) for key in ("left", "right"))
     return {"left": left, "right": right, "right_minus_left": right - left}
 
 
@@ -42,7 +41,7 @@ def _hint(v: np.ndarray, roles: list[str]) -> str:
 
 
 def posterior(H: np.ndarray, names: list[str], roles: list[str], signs: np.ndarray) -> dict:
-    """Standard deviations (rad) from the noise-whitened data information `H` (12, 12)."""
+    """Standard deviations (rad) from the noise-whitened data information `H` (n, n), n the leg joints."""
     w, V = np.linalg.eigh(0.5 * (H + H.T))
     floor = max(float(w[-1]), 1e-300) * 1e-15
     inv = np.where(w > floor, 1.0 / np.maximum(w, floor), np.inf)
@@ -53,7 +52,7 @@ def posterior(H: np.ndarray, names: list[str], roles: list[str], signs: np.ndarr
         return float(np.sqrt(np.sum(np.where(np.abs(c) > 1e-12, c * c * inv, 0.0))))
 
     out = {
-        "std_rad": {n: std_of(np.eye(12)[i]) for i, n in enumerate(names)},
+        "std_rad": {n: std_of(np.eye(len(H))[i]) for i, n in enumerate(names)},
         "pitch_sum_std_rad": {k: std_of(a) for k, a in pitch_sum_vectors(signs, roles).items()},
         "undetermined": [],
     }
@@ -85,7 +84,7 @@ def bound_warnings(dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
 
 def imu_tilt_warnings(response: np.ndarray, tilt_bound: float, signs: np.ndarray) -> list[str]:
     """What the IMU's declared tilt bound leaves undetermined: a fixed error of its
-    vertical moves the offsets by `response` (12, 2) per rad (about the pelvis x, y
+    vertical moves the offsets by `response` (n, 2) per rad (about the pelvis x, y
     axes), which no static level-ground data can tell apart. A warning when the bound
     moves a pitch sum by more than `STD_LIMIT_RAD`."""
     if tilt_bound <= 0:

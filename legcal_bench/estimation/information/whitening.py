@@ -2,13 +2,13 @@
 and the whitened residual, whose squared norm is chi-square distributed when the model
 explains the data.
 
-A frame's 11 residual rows (6 inter-foot, 5 flat-ground) are functions of its 12
-encoder angles and of the IMU's vertical (2 tilt angles), so to first order their
-covariance is
+A frame's 11 residual rows (6 inter-foot, 5 flat-ground) are functions of its n
+encoder angles (n the leg joints) and of the IMU's vertical (2 tilt angles), so to first
+order their covariance is
 
     Sigma_k = sigma_q^2 G_k G_k^T + sigma_t^2 H_k H_k^T,
 
-G_k (11, 12) the rows' Jacobian w.r.t. the joint angles (the offsets' Jacobian with the
+G_k (11, n) the rows' Jacobian w.r.t. the joint angles (the offsets' Jacobian with the
 segment mean held), H_k (11, 2) w.r.t. the IMU's roll and pitch (the `imu_tilt`
 effect's columns). Only 8 rows are independent (the height row and the right sole's
 tilt are functions of the others), so Sigma_k has rank 8: the whitening keeps its range,

@@ -46,7 +46,7 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
     (rows, n): principal-angle cosines against the offsets and against each other
     effect, the offsets combination its most confounded direction mimics, and each
     parameter's own-signal sine; plus the parameters not estimable (`held`)."""
-    Jq = J[:, :12]
+    Jq = J[:, :model.n_offsets]
     out: dict = {"effects": {}, "held": []}
     Qq = orth(Jq)
     beyond = J - Qq @ (Qq.T @ J)  # every column with the offsets' span removed
@@ -68,7 +68,7 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
             params[model.names[i]] = {"sine_to_offsets": _sine_to_span(J[:, i], Jq),
                                       "sine_to_all_others": _sine_to_span(J[:, i], rest)}
             # The closest other parameter once the offsets absorbed what they can (what a fit confuses it with).
-            others = [j for j in range(12, J.shape[1]) if j != i]
+            others = [j for j in range(model.n_offsets, J.shape[1]) if j != i]
             if others:
                 c = np.abs(beyond[:, others].T @ beyond[:, i]) / np.maximum(
                     norms[others] * norms[i], np.finfo(float).tiny)

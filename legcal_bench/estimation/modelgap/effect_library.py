@@ -38,7 +38,7 @@ def _role_joints(kin: LegKinematics, roles) -> list[tuple[str, int]]:
     out = []
     for i, role in enumerate(kin.legmap.joint_roles):
         if role in roles:
-            out.append((f"{SIDES[i // 6]}_{role}", i))
+            out.append((f"{kin.legmap.side_of(i)}_{role}", i))
     return out
 
 
@@ -52,7 +52,7 @@ class LegLength(Effect):
         for s in SIDES:
             chain = [kin.legmap.joint_roles[int(c)] for c in kin.poe[s].cols]
             knee = chain.index("knee")
-            if knee == 0 or knee == 5:
+            if knee == 0 or knee == len(chain) - 1:
                 raise CalibrationError(f"effect {self.name}: the knee must have joints on both sides in the chain")
             out += [(f"{s}_thigh", s, knee), (f"{s}_shank", s, knee + 1)]
         return out
@@ -81,7 +81,7 @@ class EncoderScale(Effect):
 
     def joint_map(self, kin, seg: SegmentData):
         joints = _role_joints(kin, PITCH_ROLES)
-        A = np.zeros((len(seg.q_enc), 12, len(joints)))
+        A = np.zeros((len(seg.q_enc), kin.legmap.n_joints, len(joints)))
         for p, (_, j) in enumerate(joints):
             A[:, j, p] = seg.q_enc[:, j]
         return A
@@ -105,7 +105,7 @@ class Compliance(Effect):
         # a lever arm computed at angles a few degrees off is off by ~10 %.
         tau = joint_loads(kin, seg.q_enc if seg.q_ref is None else seg.q_ref, seg.ft, seg.up_B)
         joints = _role_joints(kin, COMPLIANT)
-        A = np.zeros((len(seg.q_enc), 12, len(joints)))
+        A = np.zeros((len(seg.q_enc), kin.legmap.n_joints, len(joints)))
         for p, (_, j) in enumerate(joints):
             A[:, j, p] = tau[:, j]
         return A

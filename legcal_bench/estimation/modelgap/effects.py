@@ -3,7 +3,7 @@ parameter block that plugs into the assembled problem (issue #16).
 
 An `Effect` names its parameters and enters the kinematics in one or more of three ways:
 
-  joint map     q = q_enc + dq + A_k p, A_k (12, P) per frame from the data (an encoder
+  joint map     q = q_enc + dq + A_k p, A_k (n, P) per frame from the data (an encoder
                 scale: the encoder angle; a compliance: the joint's load from the ankle
                 force/torque wrenches);
   chain factors Exp(sum_i p_i g_i) inserted in a leg's chain (`legcal_bench.robots.chain`):
@@ -42,10 +42,10 @@ ENTRY_POINT_GROUP = "legcal_bench.effects"
 class SegmentData:
     """What an effect may read of one contact segment's frames."""
 
-    q_enc: np.ndarray  # (N, 12)
+    q_enc: np.ndarray  # (N, n), n the leg joints
     ft: np.ndarray | None = None  # (N, 2, 6) ankle wrenches [force, torque] in each F/T frame
     up_B: np.ndarray | None = None  # (N, 3) the IMU's vertical in the pelvis frame
-    q_ref: np.ndarray | None = None  # (N, 12) the angles at which loads are evaluated (default q_enc)
+    q_ref: np.ndarray | None = None  # (N, n) the angles at which loads are evaluated (default q_enc)
 
 
 class Effect(ABC):
@@ -65,7 +65,7 @@ class Effect(ABC):
         """(name, unit) of each parameter, SI units."""
 
     def joint_map(self, kin: LegKinematics, seg: SegmentData) -> np.ndarray | None:
-        """(N, 12, P): how the parameters move the joint angles, per frame (or None)."""
+        """(N, n, P): how the parameters move the joint angles, per frame (or None)."""
         return None
 
     def factors(self, kin: LegKinematics) -> list[tuple[str, int, np.ndarray]]:
@@ -107,8 +107,8 @@ def load_effects(names) -> list[Effect]:
 
 @dataclass
 class EffectModel:
-    """Effects compiled into one parameter layout: columns 0..11 the offsets, then each
-    effect's block in order (`slices`)."""
+    """Effects compiled into one parameter layout: the first `n_offsets` columns the
+    offsets (one per leg joint), then each effect's block in order (`slices`)."""
 
     kin: LegKinematics
     effects: list[Effect]
@@ -117,8 +117,9 @@ class EffectModel:
 
     def __post_init__(self):
         self.names = list(self.kin.legmap.joint_names)  # one per column: the offsets, then the effects'
-        self.units = ["rad"] * 12
-        self.slices, col = {}, 12
+        self.n_offsets = self.kin.legmap.n_joints
+        self.units = ["rad"] * self.n_offsets
+        self.slices, col = {}, self.n_offsets
         factors, imu = [], []
         for e in self.effects:
             params = e.parameters(self.kin)
@@ -131,13 +132,13 @@ class EffectModel:
             for side, after, gens in e.factors(self.kin):
                 gens = np.asarray(gens, dtype=float)
                 used = np.flatnonzero(np.abs(gens).sum(axis=1) > 0)
-                factors.append(Factor(side, after, gens[used], np.arange(sl.start, sl.stop)[used] - 12))
+                factors.append(Factor(side, after, gens[used], np.arange(sl.start, sl.stop)[used] - self.n_offsets))
             ax = e.imu_axes(self.kin)
             if ax is not None:
                 imu.append((sl, np.asarray(ax, dtype=float)))
             col = sl.stop
         self.n = col
-        self.chain = FactorChain(self.kin, factors, self.n - 12) if factors else None
+        self.chain = FactorChain(self.kin, factors, self.n - self.n_offsets) if factors else None
         self.imu = imu
 
     @property
@@ -147,7 +148,7 @@ class EffectModel:
     def vector(self, x: dict) -> np.ndarray:
         """The packed (n,) vector of block values `x` (missing effect blocks: zero)."""
         v = np.zeros(self.n)
-        v[:12] = x[OFFSETS]
+        v[:self.n_offsets] = x[OFFSETS]
         for e in self.effects:
             if e.name in x:
                 v[self.slices[e.name]] = x[e.name]
@@ -155,14 +156,14 @@ class EffectModel:
 
     def values(self, v: np.ndarray) -> dict[str, np.ndarray]:
         """The packed (n,) vector `v` -> block name -> values (`vector`'s inverse)."""
-        out = {OFFSETS: v[:12]}
+        out = {OFFSETS: v[:self.n_offsets]}
         for e in self.effects:
             out[e.name] = v[self.slices[e.name]]
         return out
 
     def split(self, J: np.ndarray) -> dict[str, np.ndarray]:
         """Jacobian (rows, n) -> block name -> columns."""
-        out = {OFFSETS: J[:, :12]}
+        out = {OFFSETS: J[:, :self.n_offsets]}
         for e in self.effects:
             out[e.name] = J[:, self.slices[e.name]]
         return out
@@ -229,10 +230,10 @@ class EffectSegment:
         return self._ek
 
     def _evaluate(self, v: np.ndarray) -> ExtendedKinematics:
-        m, n_cols = self.model, self.model.n
-        Q = self.q_enc + v[:12]
-        A_full = np.zeros((len(Q), 12, n_cols))
-        A_full[:, np.arange(12), np.arange(12)] = 1.0
+        m, n_cols, n_q = self.model, self.model.n, self.model.n_offsets
+        Q = self.q_enc + v[:n_q]
+        A_full = np.zeros((len(Q), n_q, n_cols))
+        A_full[:, np.arange(n_q), np.arange(n_q)] = 1.0
         for sl, A in self.maps:
             Q = Q + np.einsum("njp,p->nj", A, v[sl])
             A_full[:, :, sl] += A
@@ -242,13 +243,13 @@ class EffectSegment:
             TR = _pose(fk.R_R, fk.p_R)
             JqL, JqR, JpL, JpR = fk.J_L, fk.J_R, None, None
         else:
-            legs = m.chain.legs(Q, v[12:])
+            legs = m.chain.legs(Q, v[n_q:])
             (TL, JqL, JpL), (TR, JqR, JpR) = legs["left"], legs["right"]
-        JL = JqL @ A_full[:, :6, :]
-        JR = JqR @ A_full[:, 6:, :]
+        JL = JqL @ A_full[:, self.kin.legmap.leg_slice("left"), :]
+        JR = JqR @ A_full[:, self.kin.legmap.leg_slice("right"), :]
         if JpL is not None:
-            JL[:, :, 12:] += JpL
-            JR[:, :, 12:] += JpR
+            JL[:, :, n_q:] += JpL
+            JR[:, :, n_q:] += JpR
         C = inverse(TL) @ TR
         G = JR - adjoint(inverse(C)) @ JL
         imu_Q, imu_W = m.imu_rotation(v)
@@ -263,7 +264,7 @@ def _pose(R: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 def joint_loads(kin: LegKinematics, q_enc: np.ndarray, ft: np.ndarray, up_B: np.ndarray) -> np.ndarray:
-    """(N, 12) the load each leg joint carries from the links below it, in the sense that
+    """(N, n) the load each leg joint carries from the links below it, in the sense that
     bends it positively (a series spring of compliance c deflects by c tau): the ankle
     force/torque wrench w (as the sensor reports it: the force the foot and what it
     touches exert on the leg above, in the sensor's frame) mapped through the LOCAL
@@ -273,12 +274,12 @@ def joint_loads(kin: LegKinematics, q_enc: np.ndarray, ft: np.ndarray, up_B: np.
     the legs' products of exponentials."""
     fk = frame_kinematics(kin, q_enc)
     T = kin.T_sole_ft
-    out = np.empty((len(q_enc), 12))
+    out = np.empty((len(q_enc), kin.legmap.n_joints))
     m = kin.model
     weight = -9.81 * np.asarray(up_B, dtype=float)  # gravity per unit mass, pelvis frame (N, 3)
     for i, s in enumerate(SIDES):
-        J_ft = adjoint(inverse(T[s])) @ (fk.J_L, fk.J_R)[i]  # (N, 6, 6)
-        out[:, 6 * i:6 * i + 6] = -np.einsum("nrj,nr->nj", J_ft, ft[:, i])
+        J_ft = adjoint(inverse(T[s])) @ (fk.J_L, fk.J_R)[i]  # (N, 6, leg joints)
+        out[:, kin.legmap.leg_slice(s)] = -np.einsum("nrj,nr->nj", J_ft, ft[:, i])
         poe = kin.poe[s]
         chain = [int(kin.leg_joint_ids[c]) for c in poe.cols]
         support = [int(j) for j in m.supports[m.frames[kin.ft_frame[s]].parentJoint]]
@@ -287,7 +288,7 @@ def joint_loads(kin: LegKinematics, q_enc: np.ndarray, ft: np.ndarray, up_B: np.
             raise LegMapError(f"{kin.legmap.source or kin.legmap.name}: legs.{s}: a joint that is not a leg joint "
                               "sits between the hip and the F/T sensor; loads from the F/T cannot be computed")
         frames, P = [], np.broadcast_to(np.eye(4), (len(q_enc), 4, 4))
-        for k in range(6):  # joint k's frame in the pelvis frame, at the angles
+        for k in range(len(poe.cols)):  # chain joint k's frame in the pelvis frame, at the angles
             P = P @ poe.M[k] @ Exp(poe.S[k][None] * q_enc[:, poe.cols[k], None])
             frames.append(P)
         com = {}  # chain index -> (mass, (N, 3) centre of mass)

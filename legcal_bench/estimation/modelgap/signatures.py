@@ -4,7 +4,7 @@ cause would add to the residual, scored against the whitened residual by
 
   leg geometry   a generic error of one leg's chain: a 6-dof twist after each of its
                  joints (`LegGeometry`, an effect with factors, not a library effect:
-                 36 parameters that say which leg, not what);
+                 6 parameters per joint that say which leg, not what);
   joint angle    a joint's apparent offset growing with its angle (any scale-like cause);
   joint load     ... with its gravity/contact load from the ankle wrenches (compliance-like);
   motion         ... with the sign of its velocity (backlash, friction-like);
@@ -35,20 +35,22 @@ class LegGeometry(Effect):
         self.name = f"leg_geometry_{side}"
 
     def parameters(self, kin: LegKinematics):
-        return [(f"after_joint{k}_{c}", "m" if c < 3 else "rad") for k in range(6) for c in range(6)]
+        return [(f"after_joint{k}_{c}", "m" if c < 3 else "rad") for k in range(kin.legmap.leg_joints)
+                for c in range(6)]
 
     def factors(self, kin: LegKinematics):
         out = []
-        for k in range(6):
-            gens = np.zeros((36, 6))
+        n_chain = kin.legmap.leg_joints
+        for k in range(n_chain):
+            gens = np.zeros((6 * n_chain, 6))
             gens[6 * k:6 * k + 6] = np.eye(6)
             out.append((self.side, 2 * k + 1, gens))  # after E_k
         return out
 
 
 def joint_columns(G: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """(N, 11, 12): each joint's Jacobian column G (N, 11, 12) times its per-frame
-    signature value (N, 12), centred over the frames."""
+    """(N, 11, n): each joint's Jacobian column G (N, 11, n) times its per-frame
+    signature value (N, n), centred over the frames (n the leg joints)."""
     v = values - values.mean(axis=0)
     return G * v[:, None, :]
 

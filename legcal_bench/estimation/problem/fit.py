@@ -16,7 +16,7 @@ from legcal_bench.estimation.information.uncertainty import posterior
 from legcal_bench.estimation.information.whitening import frame_covariances, whitened_system, whitening
 from legcal_bench.estimation.modelgap.confounds import confound_lines, confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, load_effects
-from legcal_bench.estimation.problem.stance import (InterFootWeights, Prepared, Segment, StanceProblem,
+from legcal_bench.estimation.problem.stance import (MATCHED, InterFootWeights, Prepared, Segment, StanceProblem,
                                                     noise_weights)
 from legcal_bench.robots.kinematics import LegKinematics
 
@@ -69,13 +69,14 @@ def fit_model(prep: Prepared, effects=(), segments: list[Segment] | None = None,
     trimmed = segments
     if dq0 is None:
         problem = StanceProblem.of(prep, segments)
-        dq0, _, _ = problem.solve_trimmed(np.zeros(12) if start is None else np.asarray(start, float), opts)
+        dq0, _, _ = problem.solve_trimmed(np.zeros(problem.n_offsets) if start is None else np.asarray(start, float),
+                                          opts)
         trimmed = problem.segments
     model = effect_model(prep.kin, effects, segments)
     if not effects:
         dq0 = np.asarray(dq0, dtype=float)
         return _finish(prep, ModelFit((), model, dq0, dq0, (), None, trimmed))
-    x = np.r_[dq0, np.zeros(model.n - 12)]
+    x = np.r_[dq0, np.zeros(model.n - model.n_offsets)]
     confounds = start_confounds(prep, model, dq0, segments)
     held = tuple(model.names.index(h) for h in confounds["held"])
     q_ref = dq0
@@ -85,7 +86,7 @@ def fit_model(prep: Prepared, effects=(), segments: list[Segment] | None = None,
     for _ in range(2 if any(e.needs_ft for e in model.effects) else 1):
         problem = StanceProblem.of(prep, segments, model=model, q_ref=q_ref, held=held)
         x, _, _ = problem.solve_trimmed(x, opts)
-        q_ref = x[:12]
+        q_ref = x[:model.n_offsets]
     return _finish(prep, ModelFit(tuple(effects), model, x, q_ref, tuple(confounds["held"]), confounds,
                                   problem.segments))
 
@@ -107,7 +108,7 @@ def start_confounds(prep: Prepared, model, dq0: np.ndarray, segments: list[Segme
     segments = prep.segments if segments is None else segments
     if not hasattr(model, "slices"):
         model = effect_model(prep.kin, tuple(model), segments)
-    x = np.r_[np.asarray(dq0, dtype=float), np.zeros(model.n - 12)]
+    x = np.r_[np.asarray(dq0, dtype=float), np.zeros(model.n - model.n_offsets)]
     start = ModelFit(tuple(e.name for e in model.effects), model, x, np.asarray(dq0, dtype=float), (), None, segments)
     _, J, _ = whitened_rows(prep, start)
     return confound_report(J, model, prep.robot.joint_names)
@@ -132,20 +133,21 @@ def fit_effects(prep: Prepared, effects, dq0: np.ndarray):
         pass
     std = np.sqrt(np.diag(cov))
     params = {}
-    for i in range(12, model.n):
+    n_q = model.n_offsets
+    for i in range(n_q, model.n):
         params[model.names[i]] = {"value": float(x[i]), "std": float(std[i]), "unit": model.units[i],
                                   "held": i in held}
     report = {
         "effects": [e.name for e in model.effects],
         "parameters": params,
         "offsets_only_rad": {n: float(v) for n, v in zip(robot.joint_names, dq0)},
-        "offsets_rad": {n: float(v) for n, v in zip(robot.joint_names, x[:12])},
-        "offsets_std_rad": {n: float(v) for n, v in zip(robot.joint_names, std[:12])},
+        "offsets_rad": {n: float(v) for n, v in zip(robot.joint_names, x[:n_q])},
+        "offsets_std_rad": {n: float(v) for n, v in zip(robot.joint_names, std[:n_q])},
         "confounds": confounds, "confounds_at_start": fit.confounds,
         "frames_used": int(sum(len(s.frames) for s in fit.segments)),
     }
     warnings = [f"effects: {line}" for line in confound_lines(confounds)]
-    return report, x[:12], warnings
+    return report, x[:n_q], warnings
 
 
 @dataclass
@@ -153,7 +155,7 @@ class FrameResiduals:
     """Per frame of a set of segments, at a fit: the raw residual rows r (N, 11) (6
     inter-foot, 5 flat-ground; metres and radians), their Jacobians over `model`'s
     columns with the segment means re-estimated, J (N, 11, n), and held, J_fixed; the
-    Jacobian G (N, 11, 12) w.r.t. the joint angles and H (N, 11, 2) w.r.t. the IMU's
+    Jacobian G (N, 11, n) w.r.t. the n joint angles and H (N, 11, 2) w.r.t. the IMU's
     roll and pitch (means held: the noise propagation), and each frame's segment,
     recording, encoder angles and sample index in its recording."""
 
@@ -182,7 +184,7 @@ class FrameResiduals:
 
     @property
     def G(self) -> np.ndarray:
-        return self.J_fixed[:, :, :12]
+        return self.J_fixed[:, :, :self.model.n_offsets]
 
     @property
     def H(self) -> np.ndarray:
@@ -198,7 +200,7 @@ def frame_residuals(prep: Prepared, fit: ModelFit, segments: list[Segment], extr
         effects += load_effects([NOISE_TILT])
     model = EffectModel(kin, effects)
     x = np.r_[fit.x, np.zeros(model.n - fit.model.n)]
-    unit = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6)
+    unit = InterFootWeights(1.0, 1.0, 0.0, 0.0, MATCHED.w_q)
     problem = StanceProblem(kin, segments, unit, None, [], prep.options.bound, model, fit.q_ref)
     r, J_fix, J = problem.evaluate_both(x)
     rows, Js, Jfs, seg_idx, rec, q, tix = [], [], [], [], [], [], []
@@ -228,7 +230,7 @@ def declared_noise(prep: Prepared,
                    ) -> dict:
     """The recordings' declared noise (`noise_sigmas`); raises when they declare none,
     saying what `needed_by` it."""
-    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
+    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length, prep.robot.leg_joints)
     if sig is None:
         raise CalibrationError("the recordings declare no sensor noise (sensor_model.encoder_noise_std, "
                                f"accel_noise_std): {needed_by}")
@@ -303,9 +305,10 @@ def refine(prep: Prepared, fit: ModelFit) -> Refined:
     held = {fit.model.names.index(h) for h in fit.held}
     free = [i for i in range(fit.model.n) if i not in held]
     x = np.array(fit.x, dtype=float)
+    n_q = fit.model.n_offsets
     converged = False
     for n_steps in range(1, REFINE_MAX_STEPS + 1):
-        z, Jw_all, rank = _whitened(prep, replace(fit, x=x.copy(), q_ref=x[:12].copy()))
+        z, Jw_all, rank = _whitened(prep, replace(fit, x=x.copy(), q_ref=x[:n_q].copy()))
         Jw = Jw_all[:, :fit.model.n]
         A = Jw[:, free]
         step = np.linalg.lstsq(A, z, rcond=None)[0]
@@ -317,8 +320,8 @@ def refine(prep: Prepared, fit: ModelFit) -> Refined:
     r = z - A @ step
     dof = int(rank.sum()) - 6 * len(fit.segments) - len(free)
     bound = prep.options.bound
-    x[:12] = np.clip(x[:12], -bound, bound)
-    return Refined(replace(fit, x=x, q_ref=x[:12].copy()), Jw, n_steps, converged, float(r @ r / max(dof, 1)),
+    x[:n_q] = np.clip(x[:n_q], -bound, bound)
+    return Refined(replace(fit, x=x, q_ref=x[:n_q].copy()), Jw, n_steps, converged, float(r @ r / max(dof, 1)),
                    Jw_all[:, fit.model.n:])
 
 
@@ -326,7 +329,7 @@ def noise_posterior(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sign
     """Posterior standard deviations: `problem`'s frames' data rows, each divided by its
     declared noise level, C*_s eliminated (the projected Jacobian) at `dq`; None when
     the recordings declare no noise."""
-    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
+    sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length, prep.robot.leg_joints)
     if sig is None:
         return None
     whitened = StanceProblem(prep.kin, problem.segments, noise_weights(sig), None, [], problem.bound)
@@ -337,7 +340,7 @@ def noise_posterior(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sign
 
 
 def tilt_response(prep: Prepared, problem: StanceProblem, dq: np.ndarray, gls: Refined | None = None) -> np.ndarray:
-    """(12, 2) how the estimate moves per rad of a fixed error of the IMU's vertical
+    """(n, 2) how the estimate moves per rad of a fixed error of the IMU's vertical
     about the pelvis x and y axes (every up vector rotated alike): to first order, the
     Gauss-Newton step of the fit's own problem against the rows' change with the tilt,
     -(J^T J)^-1 J^T T, T the `imu_tilt` effect's columns at zero (segment means
@@ -348,12 +351,12 @@ def tilt_response(prep: Prepared, problem: StanceProblem, dq: np.ndarray, gls: R
         held = {gls.fit.model.names.index(h) for h in gls.fit.held}
         free = [i for i in range(gls.fit.model.n) if i not in held]
         step = np.linalg.lstsq(gls.Jw[:, free], gls.tilt, rcond=None)[0]
-        return -step[:12]
+        return -step[:gls.fit.model.n_offsets]
     model = effect_model(prep.kin, [NOISE_TILT], problem.segments)
     with_tilt = StanceProblem(prep.kin, problem.segments, problem.w, problem.prior, problem.knees, problem.bound,
                               model, np.asarray(dq, dtype=float))
-    x = np.r_[dq, np.zeros(model.n - 12)]
+    x = np.r_[dq, np.zeros(model.n - model.n_offsets)]
     with_tilt.means_at(x)
     _, J = with_tilt.evaluate(x, "projected")
     tilt = J[:, model.slices[NOISE_TILT]][:, :2]
-    return -np.linalg.lstsq(J[:, :12], tilt, rcond=None)[0]
+    return -np.linalg.lstsq(J[:, :model.n_offsets], tilt, rcond=None)[0]

@@ -18,8 +18,8 @@ Per contact segment, on the raw encoders (filtering is not repeated after correc
   5. a sudden slip splits the segment: a frame-to-frame jump of the inter-foot
      translation above max(1 mm, 10x the segment's median step) starts a new contact
      segment (each keeps its own mean); pieces shorter than `min_frames` are dropped;
-  6. joint-angle clustering (k-means on the 12 encoder angles) and subsampling to at
-     most N_max = 500 distinct configurations per segment.
+  6. joint-angle clustering (k-means on the leg joints' encoder angles) and subsampling
+     to at most N_max = 500 distinct configurations per segment.
 The largest-residual trimming (10 %) happens after the first solve, in the calibrator.
 """
 
@@ -58,7 +58,7 @@ class Segment:
     """Frames of one contact segment chosen for the solve."""
 
     name: str
-    q_enc: np.ndarray  # (N, 12)
+    q_enc: np.ndarray  # (N, n), n the leg joints
     imu_acc: np.ndarray  # (N, 3)
     frames: np.ndarray  # indices into the source recording
 

@@ -7,7 +7,7 @@ Jacobian to scipy's least squares, and reports the information matrix of the sha
 blocks from the data terms alone and regularized (priors added), with any per-frame
 blocks eliminated (Schur complement).
 
-Blocks are shared (one instance, e.g. the 12 offsets) or per frame (one instance per
+Blocks are shared (one instance, e.g. the offsets) or per frame (one instance per
 frame of the term set, e.g. Yamane's roll and pitch of each frame). Columns are the
 shared blocks in order, then the per-frame blocks frame-major. Rows are the terms in
 order; consecutive per-frame terms over the same frames are interleaved frame by frame

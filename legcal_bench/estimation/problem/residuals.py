@@ -58,7 +58,8 @@ def _flat_rows(up: np.ndarray, R_WB: np.ndarray, p_L, p_R, R_L, R_R, JL: np.ndar
 
 
 def flat_residuals(fk: FrameKinematics, up_B: np.ndarray, R_WB: np.ndarray, with_jacobian: bool = True):
-    """(N, 5) flat-ground residuals and (N, 5, 12) their Jacobians."""
+    """(N, 5) flat-ground residuals and (N, 5, n) their Jacobians (n the leg joints: the
+    left sole's columns, then the right's, leg-map order)."""
     r, GL, GR = _flat_rows(up_B, R_WB, fk.p_L, fk.p_R, fk.R_L, fk.R_R, fk.J_L, fk.J_R)
     if not with_jacobian:
         return r, None
@@ -87,7 +88,7 @@ def flat_residuals_extended(ek, up0: np.ndarray, R_WB0: np.ndarray):
 
 
 def feet_residuals(C: np.ndarray, G: np.ndarray, M: np.ndarray, mode: str = "fixed"):
-    """(N, 6) residuals Log(M^-1 C_k) and (N, 6, 12) Jacobians.
+    """(N, 6) residuals Log(M^-1 C_k) and (N, 6, n) Jacobians (n the columns of G).
 
     mode "fixed": M held constant (the paper's inner solve); "projected": M = M(dq)
     re-estimated with dq (variable projection; requires M to be the Frechet mean);

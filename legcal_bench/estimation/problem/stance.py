@@ -34,6 +34,7 @@ from legcal_bench.estimation.problem.problem import Block, Problem
 from legcal_bench.estimation.problem.smoothing import smooth_wrenches
 from legcal_bench.estimation.problem.terms import (OFFSETS, FlatGroundTerm, HeldParametersTerm, InterFootTerm,
                                                    KneePriorTerm, SegmentKinematics, TikhonovTerm)
+from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
 
@@ -48,7 +49,9 @@ class InterFootWeights:
     lambda_g: float
     lambda_q: float
     lambda_knee: float
-    w_q: tuple[float, ...]  # per leg, in the platform's joint order (left leg; mirrored to the right)
+    # Per leg, in the platform's joint order (its three hips, knee, ankle pitch, ankle roll;
+    # left leg, mirrored to the right): read by role (`joint_weights`).
+    w_q: tuple[float, ...]
     unit_scale: float = 1.0  # residual units: 1 = metres and radians, 1000 = mm and mrad
     # Per-row 1/sigma instead of unit_scale (the "sensor" setting): feet translation,
     # feet rotation, flat height, flat normal.
@@ -56,19 +59,33 @@ class InterFootWeights:
 
 
 # Both residual types at unit weight in mm and mrad, no priors.
-MATCHED = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1, 1, 1, 1, 1, 1), unit_scale=paper.MATCHED_UNIT_SCALE)
+MATCHED = InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * len(LEG_ROLES), unit_scale=paper.MATCHED_UNIT_SCALE)
+
+
+def joint_weights(w_q, legmap: LegMap) -> np.ndarray:
+    """(n,) the per-leg weights `w_q` (the platform's joint order: its hips in the leg
+    map's hip order, then knee, ankle pitch, ankle roll) on each leg joint, by role; a
+    role the robot lacks has no joint and its weight goes unused."""
+    order = legmap.hip_order + tuple(r for r in LEG_ROLES if r not in HIP_ROLES)
+    by_role = dict(zip(order, w_q))
+    missing = [r for r in dict.fromkeys(legmap.joint_roles) if r not in by_role]
+    if missing:
+        raise CalibrationError(f"w_q {tuple(w_q)}: no weight for the roles {missing} (give one per leg joint, "
+                               f"in the order {', '.join(order)})")
+    return np.array([by_role[r] for r in legmap.joint_roles], dtype=float)
 
 
 def noise_weights(sig: dict) -> InterFootWeights:
     """Each row divided by its declared noise level (`noise_sigmas`), no priors."""
-    return InterFootWeights(1.0, 1.0, 0.0, 0.0, (1,) * 6, row_sigmas=(
+    return InterFootWeights(1.0, 1.0, 0.0, 0.0, MATCHED.w_q, row_sigmas=(
         sig["feet_translation"], sig["feet_rotation"], sig["flat_height"], sig["flat_normal"]))
 
 
 def sensor_weights(legmap: LegMap, recordings: list[Recording], **overrides) -> tuple[str, InterFootWeights]:
     """("sensor", the declared noise's weights), or ("matched", `MATCHED`) for recordings
     that declare no noise (noise-free data: any weighting reaches the same optimum)."""
-    sig = noise_sigmas(recordings[0].sensor_model, LegKinematics(legmap).dims.leg_length) if recordings else None
+    sig = (noise_sigmas(recordings[0].sensor_model, LegKinematics(legmap).dims.leg_length, legmap.leg_joints)
+           if recordings else None)
     if sig is None:
         return "matched", replace(MATCHED, **overrides)
     return SENSOR, replace(noise_weights(sig), **overrides)
@@ -206,7 +223,8 @@ class StanceProblem:
                  q_ref: np.ndarray | None = None, held: tuple[int, ...] = ()):
         self.kin, self.w, self.prior, self.knees, self.bound = kin, w, prior, list(knees), bound
         self.model, self.q_ref, self.held = model, q_ref, tuple(held)
-        self.n = 12 if model is None else model.n
+        self.n_offsets = kin.legmap.n_joints
+        self.n = self.n_offsets if model is None else model.n
         if w.row_sigmas is None:
             self.sf = np.sqrt(w.lambda_f) * w.unit_scale * np.ones(6)
             self.sg = np.sqrt(w.lambda_g) * w.unit_scale * np.ones(5)
@@ -215,7 +233,7 @@ class StanceProblem:
             self.sf = np.sqrt(w.lambda_f) * np.array([1 / st] * 3 + [1 / sr] * 3)
             self.sg = np.sqrt(w.lambda_g) * np.array([1 / sh] + [1 / sn] * 4)
         # Prior rows share the residual units (rad, or mrad in the matched setting).
-        self.wq = np.sqrt(w.lambda_q) * w.unit_scale * np.array(list(w.w_q) * 2, dtype=float)
+        self.wq = np.sqrt(w.lambda_q) * w.unit_scale * joint_weights(w.w_q, kin.legmap)
         self.sk = np.sqrt(w.lambda_knee) * w.unit_scale
         self.build(segments)
 
@@ -241,7 +259,7 @@ class StanceProblem:
             terms.append(TikhonovTerm(self.wq))
         if self.prior is not None and self.w.lambda_knee > 0:
             terms.append(KneePriorTerm(self.knees, self.prior, self.sk))
-        blocks = [Block(OFFSETS, 12, bound=self.bound)]
+        blocks = [Block(OFFSETS, self.n_offsets, bound=self.bound)]
         if self.model is not None:
             blocks += [Block(name, size) for name, size in self.model.blocks]
             if self.held:
@@ -259,7 +277,7 @@ class StanceProblem:
         return H
 
     def means_at(self, x: np.ndarray) -> list:
-        values = self.problem.unpack(x) if len(x) > 12 else x
+        values = self.problem.unpack(x) if len(x) > self.n_offsets else x
         return [t.update_mean(values) for t in self.feet]
 
     def evaluate(self, dq: np.ndarray, mode: str):
@@ -287,9 +305,9 @@ class StanceProblem:
         return r, J_fixed, J_proj
 
     def solve(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list]:
-        lb, ub = -opts.bound * np.ones(12), opts.bound * np.ones(12)
+        lb, ub = -opts.bound * np.ones(self.n_offsets), opts.bound * np.ones(self.n_offsets)
         x0 = np.array(dq0, dtype=float)
-        x0[:12] = np.clip(x0[:12], lb + 1e-12, ub - 1e-12)
+        x0[:self.n_offsets] = np.clip(x0[:self.n_offsets], lb + 1e-12, ub - 1e-12)
         history = []
         if opts.solver == "projected":
             for t in self.feet:

@@ -129,7 +129,7 @@ class HeldParametersTerm(Term):
         self.blocks = tuple(e.name for e in model.effects)
 
     def compute(self, x):
-        v = self.model.vector({OFFSETS: np.zeros(12), **x})
+        v = self.model.vector({OFFSETS: np.zeros(self.model.n_offsets), **x})
         rows = self.weight * v[self.held]
         J = np.zeros((len(self.held), self.model.n))
         J[np.arange(len(self.held)), self.held] = self.weight
@@ -149,7 +149,7 @@ class KneePriorTerm(Term):
         self.knees, self.prior, self.weight = list(knees), np.asarray(prior, dtype=float), float(weight)
 
     def compute(self, x):
-        J = np.zeros((len(self.knees), 12))
+        J = np.zeros((len(self.knees), len(x[OFFSETS])))
         J[np.arange(len(self.knees)), self.knees] = self.weight
         return self.weight * (x[OFFSETS][self.knees] - self.prior), {OFFSETS: J}
 
@@ -174,6 +174,7 @@ class SoleHeightTerm(Term):
 
     def __init__(self, kin: LegKinematics, q_enc: np.ndarray, weight: float):
         self.seg = SegmentKinematics(kin, q_enc)
+        self.legmap = kin.legmap
         self.n_frames, self.weight = len(q_enc), float(weight)
         self.c = np.vstack([kin.corners["left"], kin.corners["right"]]).reshape(2, 4, 3)  # corners, sole frames
 
@@ -189,13 +190,13 @@ class SoleHeightTerm(Term):
         # frame matters: g = R_k^T e_z (the third row of R_k), so dz = (g^T R_foot) (J_v - [c]x J_w).
         z = (P @ g[:, :, None])[..., 0]
         r = self.weight * (z - z.mean(axis=1, keepdims=True))
-        Jz = np.zeros((n, 8, 12))
+        Jz = np.zeros((n, 8, self.legmap.n_joints))
         for side, (Rf, Jf) in enumerate(((fk.R_L, fk.J_L), (fk.R_R, fk.J_R))):
             a = (g[:, None, :] @ Rf)[:, 0]  # (n, 3): e_z of the tilted frame, in the sole frame
             # a . (J_v - c x J_w) = a . J_v - (a x c) . J_w ... as rows over the 4 corners.
-            aJv = (a[:, None, :] @ Jf[:, :3])  # (n, 1, 6)
+            aJv = (a[:, None, :] @ Jf[:, :3])  # (n, 1, leg joints)
             axc = np.cross(a[:, None, :], self.c[side][None])  # (n, 4, 3)
-            Jz[:, 4 * side:4 * side + 4, 6 * side:6 * side + 6] = aJv - axc @ Jf[:, 3:]
+            Jz[:, 4 * side:4 * side + 4, self.legmap.leg_slice(side)] = aJv - axc @ Jf[:, 3:]
         J_dq = self.weight * (Jz - Jz.mean(axis=1, keepdims=True))
         J_tilt = np.zeros((n, 8, 2))
         for j, dg in enumerate((dg_roll, dg_pitch)):
