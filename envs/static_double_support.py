@@ -17,11 +17,12 @@ applied and `info["posture_reachable"]` is False. In the `standing` stance the l
 are straight and the action is ignored.
 
 ## Observation space
-`Dict`: `q_enc` (12,) rad in leg-map order, `imu_acc` (3,) m/s², `imu_gyro` (3,)
+`Dict`: `q_enc` (n,) rad in leg-map order (n = the robot's leg joints, `legmap.n_joints`:
+12 for six-joint legs, 10 without ankle roll), `imu_acc` (3,) m/s², `imu_gyro` (3,)
 rad/s, and `ft` (2, 6) [force N, torque N m] per ankle in weld and contact modes.
 
 ## Rewards
-The information gain of the new frame about the 12 offsets: the increase of
+The information gain of the new frame about the n offsets (one per leg joint): the increase of
 log det(H_data + εI) of the stance's matched residuals (mm, mrad) linearised at the
 logged data, ε = 1 (`legcal_bench.estimation.information.gain.InformationGain`). An
 episode's return is therefore the log-determinant of the information its motion
@@ -46,8 +47,8 @@ Never terminates; registered ids truncate after 1000 steps.
 
 ## Arguments
 `robot` (built-in name or leg-map path; required for the `-Path-` id), `mode`
-(`kinematic`, `weld`, `contact`), `offsets` (`none`, `paper`, `random:<deg>`, or 12
-radians), `sensors` (`zero`, `realistic` or a sensor-model dict), `sim_robot` (simulate
+(`kinematic`, `weld`, `contact`), `offsets` (`none`, `paper`, `random:<deg>`, or one
+radian per leg joint), `sensors` (`zero`, `realistic` or a sensor-model dict), `sim_robot` (simulate
 another model with the same joints), `mjcf`, `rate_hz` (logging rate, also
 `render_fps`), `physics_dt`, `offset_seed`, `knee_straight_error_rad`, `settle_s`,
 `information_reward`, `render_mode` (`rgb_array`).
@@ -118,7 +119,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         low, high = posture_bounds(self.sim.nominal.dims)
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float64)
         obs = {
-            "q_enc": spaces.Box(-np.inf, np.inf, (12,), np.float64),
+            "q_enc": spaces.Box(-np.inf, np.inf, (legmap.n_joints,), np.float64),
             "imu_acc": spaces.Box(-np.inf, np.inf, (3,), np.float64),
             "imu_gyro": spaces.Box(-np.inf, np.inf, (3,), np.float64),
         }
@@ -155,9 +156,9 @@ class StaticDoubleSupportEnv(MujocoEnv):
 
     @property
     def information_matrix(self) -> np.ndarray:
-        """H_data of the episode so far (12, 12), mm and mrad units (the reward's; zeros
+        """H_data of the episode so far (n, n) over the n leg joints' offsets, mm and mrad units (the reward's; zeros
         with `information_reward=False`)."""
-        return self._information.H if self._information is not None else np.zeros((12, 12))
+        return self._information.H if self._information is not None else np.zeros((self.legmap.n_joints,) * 2)
 
     @property
     def offsets(self) -> np.ndarray:

@@ -9,12 +9,13 @@ physics is `legcal_bench.sim.walking.WalkingSim` (PD servos at physics rate insi
 MuJoCo's step, the walking-only model additions of `WalkingConfig`).
 
 ## Action space
-`Box(12)`: joint position targets (rad, leg-map order, encoder space: what the robot's
-software commands), within the joints' ranges widened by 0.5 rad.
+`Box(n)`: joint position targets, one per leg joint (n = `legmap.n_joints`: 12 for
+six-joint legs, 10 without ankle roll; rad, leg-map order, encoder space: what the
+robot's software commands), within the joints' ranges widened by 0.5 rad.
 
 ## Observation space
 `Dict`, what the robot's software reads, in leg-map order and the base frame through
-the nominal IMU mount: `q_enc` (12,) corrected encoder angles (rad), `dq_enc` (12,)
+the nominal IMU mount: `q_enc` (n,) corrected encoder angles (rad), `dq_enc` (n,)
 joint velocities (rad/s), `ang_vel` (3,) the gyro's rate (rad/s), `gravity` (3,) the
 unit gravity direction from an orientation filter on the IMU (its noise, bias and
 mounting tilt included), `imu_acc`, `imu_gyro` (3,) raw IMU readings (IMU frame), and
@@ -29,8 +30,8 @@ default pose (the policy spec's `default_q`, or for a robot without a spec stanc
 squat) with the servos holding it, its lowest sole corner on the floor, with a seeded
 jitter of +-0.01 rad per joint and +-0.02 rad of heading. The seed also drives the
 sensor noise. Options override the constructor's `offsets` (a preset: `none`,
-`paper`, `paper@<deg>`, `random:<deg>`, or 12 radians) and `correction` (12 radians,
-or None).
+`paper`, `paper@<deg>`, `random:<deg>`, or one radian per leg joint) and `correction` (one radian per leg
+joint, or None).
 
 ## Episode end
 Terminates when the robot falls: the pelvis below 60 % of its starting height or
@@ -39,7 +40,7 @@ tilted more than 1 rad (`legcal_bench.sim.walking`). Registered ids truncate aft
 
 ## Info
 The truth: `time`, `pelvis_pose` [x y z qw qx qy qz], `base_lin_vel` (base frame;
-privileged), `q_true`, `torque` (12, N m), `power` (W, sum |tau qdot|), `foot_loads`
+privileged), `q_true`, `torque` (n, N m), `power` (W, sum |tau qdot|), `foot_loads`
 (N, left/right), `new_strikes` (this step's touchdowns: (side, time, [x, y, z])),
 `strike_counts`, `fallen`, `fallen_at`, `offsets`, `correction`. Every touchdown so
 far: `env.unwrapped.sim.strikes`.
@@ -100,12 +101,14 @@ def teacher_walking_config(legmap: LegMap, recipe, walker) -> WalkingConfig:
                    physics_dt=1.0 / recipe.physics_hz, decimation=int(round(recipe.physics_hz / recipe.control_hz)))
 
 
-def _correction(value, where: str) -> np.ndarray:
+def _correction(value, where: str, legmap: LegMap) -> np.ndarray:
+    n = legmap.n_joints
     if value is None:
-        return np.zeros(12)
+        return np.zeros(n)
     c = np.asarray(value, dtype=float)
-    if c.shape != (12,) or not np.isfinite(c).all():
-        raise ConfigError(f"{where}: give 12 finite radians in leg-map order (a calibration's offsets), or None")
+    if c.shape != (n,) or not np.isfinite(c).all():
+        raise ConfigError(f"{where}: give {n} finite radians, one per leg joint of {legmap.name} in leg-map order "
+                          "(a calibration's offsets), or None")
     return c
 
 
@@ -140,14 +143,15 @@ class WalkingEnv(MujocoEnv):
         self._offset_seed = offset_seed
         self.offsets_spec = offsets
         self.offsets = resolve_offsets(offsets, self.legmap, np.random.default_rng(offset_seed))
-        self.correction = _correction(correction, "correction")
+        self.correction = _correction(correction, "correction", self.legmap)
         m, sc = self.sim.model, self.sim.scene
         jnt = m.dof_jntid[sc.dof_adr]
         low = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 0] - 0.5, -np.pi)
         high = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 1] + 0.5, np.pi)
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float64)
         box = lambda *shape: spaces.Box(-np.inf, np.inf, shape, np.float64)  # noqa: E731
-        obs = {"q_enc": box(12), "dq_enc": box(12), "ang_vel": box(3), "gravity": box(3), "imu_acc": box(3),
+        n = self.legmap.n_joints
+        obs = {"q_enc": box(n), "dq_enc": box(n), "ang_vel": box(3), "gravity": box(3), "imu_acc": box(3),
                "imu_gyro": box(3)}
         if sc.has_ft:
             obs["ft"] = box(2, 6)
@@ -161,7 +165,7 @@ class WalkingEnv(MujocoEnv):
         if "offsets" in options:
             self.offsets = resolve_offsets(options["offsets"], self.legmap, np.random.default_rng(self._offset_seed))
         if "correction" in options:
-            self.correction = _correction(options["correction"], "reset option correction")
+            self.correction = _correction(options["correction"], "reset option correction", self.legmap)
         self.sim.reset(self.offsets, self.correction, self.np_random)
         self._counts = {"left": 0, "right": 0}
         return self._observe(), self._info()
@@ -173,7 +177,7 @@ class WalkingEnv(MujocoEnv):
     def advance(self, action) -> dict:
         """`step` without its info dict (the truth, from `sim`, when asked): the
         observation. For a caller that reads the truth itself (`evaluation.walk`)."""
-        self.sim.step(np.asarray(action, dtype=np.float64).reshape(12))
+        self.sim.step(np.asarray(action, dtype=np.float64).reshape(self.legmap.n_joints))
         return self._observe()
 
     def _observe(self) -> dict:

@@ -2,7 +2,7 @@
 observations composed from the spec's terms, actions turned into joint targets.
 
 `PolicyRunner(spec, legmap)` is the policy as the robot's software runs it: `reset()`,
-then each control step `act(obs, info, time)` -> the 12 joint targets in leg-map order
+then each control step `act(obs, info, time)` -> the joint targets, one per leg joint, in leg-map order
 (encoder space; the env's servos track them on the corrected encoders).
 `walking_config()` gives the env the spec's gains, default pose and rates.
 """
@@ -24,7 +24,7 @@ def joint_index(spec: PolicySpec, legmap: LegMap) -> np.ndarray:
     missing = [j for j in spec.joints if j not in legmap.joint_names]
     extra = [j for j in legmap.joint_names if j not in spec.joints]
     if missing or extra:
-        raise ConfigError(f"policy spec {spec.path}: its joints must be the leg map's 12 leg joints "
+        raise ConfigError(f"policy spec {spec.path}: its joints must be the leg map's {legmap.n_joints} leg joints "
                           f"({legmap.name}), by name, in any order; "
                           + (f"not in the leg map: {missing}; " if missing else "")
                           + (f"leg joints the policy does not drive: {extra}" if extra else ""))
@@ -65,7 +65,7 @@ class PolicyRunner:
                                                         self.default_q))
 
     def act(self, obs: dict, info: dict, time: float) -> np.ndarray:
-        """Joint targets (12, leg-map order, rad) for this control step."""
+        """Joint targets (one per leg joint, leg-map order, rad) for this control step."""
         return self.targets(self.model(self.observation(obs, info, time)))
 
     def targets(self, action: np.ndarray) -> np.ndarray:
@@ -74,7 +74,7 @@ class PolicyRunner:
         a = action if self.spec.action_clip is None else np.clip(action, -self.spec.action_clip,
                                                                   self.spec.action_clip)
         self.last_action = a
-        target = np.empty(12)
+        target = np.empty(self.legmap.n_joints)
         target[self.index] = self.default_q + self.spec.action_scale * a
         return target
 
@@ -91,7 +91,7 @@ def walking_config(spec: PolicySpec, legmap: LegMap, **overrides) -> WalkingConf
     index = joint_index(spec, legmap)
 
     def leg_order(v):
-        out = np.empty(12)
+        out = np.empty(legmap.n_joints)
         out[index] = v
         return tuple(out.tolist())
 

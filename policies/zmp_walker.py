@@ -30,6 +30,7 @@ from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
 from legcal_bench.policies.zmp_preview import preview_gains, track
 from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.double_support import posture_ik
 
 
@@ -88,7 +89,7 @@ def plan_gait(kin: LegKinematics, n_steps: int, p: GaitParams = GaitParams()) ->
 
 
 def joint_targets(kin: LegKinematics, gait: Gait, p: GaitParams = GaitParams()) -> np.ndarray:
-    """(n, 12) joint targets: the CoM by preview control, the pelvis under it, IK."""
+    """(n, n_joints) joint targets: the CoM by preview control, the pelvis under it, IK."""
     z = kin.dims.leg_length * (1 - p.depth)
     g = preview_gains(z, p.dt)
     cx, _ = track(g, gait.zmp[:, 0])
@@ -137,8 +138,10 @@ class ZmpWalker:
         # Each fed-back joint of each leg: its column and the sign of its axis along the
         # torso axis it corrects (x for roll, y for pitch), so any robot's conventions work.
         roles, axes = list(legmap.joint_roles), kin.joint_axes(self.Q[0])
-        self.joints = [[(i, float(np.sign(axes[i, FED_BACK[roles[i]]]) or 1.0)) for i in leg if roles[i] in FED_BACK]
-                       for leg in (range(6), range(6, 12))]
+        # A role the robot lacks (no ankle roll) has no column and gets no correction.
+        self.joints = [[(i, float(np.sign(axes[i, FED_BACK[roles[i]]]) or 1.0))
+                        for i in range(legmap.n_joints)[legmap.leg_slice(side)] if roles[i] in FED_BACK]
+                       for side in SIDES]
         self.roles = roles
         self.planned_load = np.stack([(self.plan.right[:, 2] > 1e-9) | (self.plan.left[:, 2] <= 1e-9),
                                       (self.plan.left[:, 2] > 1e-9) | (self.plan.right[:, 2] <= 1e-9)], 1).astype(float)

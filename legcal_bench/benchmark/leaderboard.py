@@ -149,7 +149,8 @@ def _plots(groups: dict, out: Path) -> dict:
         for n in names:
             eig = [c["injected"]["conditioning"].get("eigenvalues_H_data") for c in g[n]]
             if all(e is not None for e in eig):
-                ax.semilogy(range(1, 13), np.mean(eig, axis=0), "o-", ms=3, label=n)
+                mean = np.mean(eig, axis=0)
+                ax.semilogy(range(1, len(mean) + 1), mean, "o-", ms=3, label=n)
         ax.set_xlabel("eigenvalue index (ascending)")
         ax.set_ylabel("eigenvalue of H_data (method's own units)")
         ax.set_title(f"{robot}, {mode}: information spectra (mean over seeds)")
@@ -164,9 +165,9 @@ def _plots(groups: dict, out: Path) -> dict:
         width = 0.8 / max(len(shown), 1)
         for i, n in enumerate(shown):
             errs = np.array([[c["injected"]["score"]["recovery"]["per_joint_error_deg"][j] for j in joints] for c in g[n]])
-            ax.bar(np.arange(12) + (i - (len(shown) - 1) / 2) * width, errs.mean(0), width, yerr=errs.std(0),
+            ax.bar(np.arange(len(joints)) + (i - (len(shown) - 1) / 2) * width, errs.mean(0), width, yerr=errs.std(0),
                    label=n, capsize=1.5)
-        ax.set_xticks(range(12), [j.replace("_joint", "").replace("_", " ") for j in joints], rotation=40,
+        ax.set_xticks(range(len(joints)), [j.replace("_joint", "").replace("_", " ") for j in joints], rotation=40,
                       ha="right", fontsize=7)
         ax.axhline(0, color="k", lw=0.5)
         ax.set_ylabel("signed recovery error (deg)")

@@ -42,7 +42,7 @@ class Recording:
     robot: str
     joint_names: list[str]
     time: np.ndarray  # (N,) s, strictly increasing
-    q_enc: np.ndarray  # (N, 12) rad, encoder angles in joint_names order
+    q_enc: np.ndarray  # (N, n) rad, encoder angles in joint_names order (n leg joints)
     imu_acc: np.ndarray  # (N, 3) m/s^2, specific force in the IMU frame
     imu_gyro: np.ndarray  # (N, 3) rad/s, angular rate in the IMU frame
     sensor_model: SensorModel = field(default_factory=SensorModel)
@@ -81,8 +81,8 @@ class Recording:
 class Truth:
     """The simulator's ground truth for one segment (never given to calibrators)."""
 
-    q_true: np.ndarray  # (N, 12)
-    offsets: np.ndarray  # (12,) injected, q_enc = q_true - offsets (+ noise)
+    q_true: np.ndarray  # (N, n), n leg joints
+    offsets: np.ndarray  # (n,) injected, q_enc = q_true - offsets (+ noise)
     sole_poses_world: np.ndarray  # (N, 2, 7) [x y z qw qx qy qz], left then right
     pelvis_pose_world: np.ndarray  # (N, 7)
     posture: np.ndarray  # (N, 6) commanded pelvis posture actually applied
@@ -90,7 +90,7 @@ class Truth:
     imu_true_acc: np.ndarray  # (N, 3)
     imu_true_gyro: np.ndarray  # (N, 3)
     meta: dict = field(default_factory=dict)
-    # (N, 12) what the encoders read without noise (q_true - offsets unless a reality
+    # (N, n) what the encoders read without noise (q_true - offsets unless a reality
     # effect, e.g. an encoder scale or a series spring, says otherwise); optional.
     q_enc_clean: np.ndarray | None = None
 
@@ -115,7 +115,8 @@ def truth_path(path: str | Path) -> Path:
 # -------------------------------------------------------------------- validation
 # A logging rate outside this range means 'time' is not in seconds (ms or ns read as s).
 MIN_RATE_HZ, MAX_RATE_HZ = 1.0, 5000.0
-_SHAPES = {"time": (None,), "q_enc": (None, 12), "imu_acc": (None, 3), "imu_gyro": (None, 3), "ft": (None, 2, 6)}
+# q_enc: (N, n) with n the robot's leg joints (`LegMap.n_joints`), checked in `validate`.
+_SHAPES = {"time": (None,), "q_enc": (None, None), "imu_acc": (None, 3), "imu_gyro": (None, 3), "ft": (None, 2, 6)}
 _META_KEYS = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model")
 
 
@@ -129,7 +130,7 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         if not isinstance(meta[key], str):
             raise RecordingError(f"{where}: metadata field '{key}' must be a string, got {meta[key]!r}")
     if not isinstance(meta["joint_names"], list) or not all(isinstance(n, str) for n in meta["joint_names"]):
-        raise RecordingError(f"{where}: field 'joint_names' must be a list of the 12 leg joint names (strings), "
+        raise RecordingError(f"{where}: field 'joint_names' must be a list of the robot's leg joint names (strings), "
                              f"got {meta['joint_names']!r}")
     if not isinstance(meta["sensor_model"], dict):
         raise RecordingError(f"{where}: field 'sensor_model' must be a JSON object of sensor-model fields "
@@ -147,8 +148,12 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
     if meta["kind"] not in KINDS:
         raise RecordingError(f"{where}: field 'kind' is {meta['kind']!r}; use one of {KINDS}")
     names = list(meta["joint_names"])
-    if len(names) != 12:
-        raise RecordingError(f"{where}: field 'joint_names' must list the 12 leg joints, got {len(names)}")
+    if joint_names is not None and len(names) != len(joint_names):
+        raise RecordingError(f"{where}: field 'joint_names' must list the robot's {len(joint_names)} leg joints, "
+                             f"got {len(names)}")
+    if not names or len(names) % 2:
+        raise RecordingError(f"{where}: field 'joint_names' must list the robot's leg joints, left leg then right "
+                             f"(the same number per leg), got {len(names)}")
     if joint_names is not None and names != list(joint_names):
         missing = [n for n in joint_names if n not in names]
         extra = [n for n in names if n not in joint_names]
@@ -159,7 +164,8 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         if key not in arrays:
             raise RecordingError(f"{where}: missing field '{key}' (see docs/recording-format.md)")
     n = None
-    for key, shape in _SHAPES.items():
+    shapes = {**_SHAPES, "q_enc": (None, len(names))}  # one column per leg joint, in joint_names order
+    for key, shape in shapes.items():
         if key not in arrays:
             continue
         a = np.asarray(arrays[key])
@@ -170,7 +176,8 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
                                  "values? Save it as floats in SI units (radians, m/s^2, rad/s, seconds)")
         if a.ndim != len(shape) or any(s is not None and s != d for s, d in zip(shape, a.shape)):
             want = "(N, " + ", ".join(str(s) for s in shape[1:]) + ")" if len(shape) > 1 else "(N,)"
-            raise RecordingError(f"{where}: field '{key}' has shape {a.shape}, expected {want}")
+            raise RecordingError(f"{where}: field '{key}' has shape {a.shape}, expected {want}" + (
+                f": one column per leg joint, the robot's {len(names)} in joint_names order" if key == "q_enc" else ""))
         if n is None:
             n = a.shape[0]
         elif a.shape[0] != n:

@@ -165,8 +165,9 @@ def trial_walk(cfg: ClosedLoopConfig, seed: int, condition: str, estimate: np.nd
     Only the nominal walk keeps its logs (the odometry reads them)."""
     legmap, env, runner = _walker(cfg)
     dq = trial_offsets(cfg.offsets, legmap, seed)
-    offsets, correction = {"nominal": (np.zeros(12), None), "uncorrected": (dq, None), "corrected": (dq, estimate),
-                           "oracle": (dq, dq), "spread": (np.zeros(12), None)}[condition]
+    none = np.zeros(legmap.n_joints)
+    offsets, correction = {"nominal": (none, None), "uncorrected": (dq, None), "corrected": (dq, estimate),
+                           "oracle": (dq, dq), "spread": (none, None)}[condition]
     return walk(env, runner, cfg.seconds, seed + (SPREAD_SEED_OFFSET if condition == "spread" else 0),
                 {"offsets": offsets, "correction": correction}, log=condition == "nominal")
 
@@ -362,7 +363,7 @@ def estimate_walks(robot, policy: str, true_dq: np.ndarray, estimates: dict, tri
                    seconds: float = 20.0, sensors: str = "realistic", progress: bool = True) -> dict:
     """What the choice between estimates does to a walk: per seed, the nominal walk (no
     offsets), the walk with `true_dq` uncorrected, and one walk per estimate (label ->
-    12 radians) with `true_dq` on the robot corrected by it, the same seed driving noise
+    one radian per leg joint) with `true_dq` on the robot corrected by it, the same seed driving noise
     and jitter; deviations from the seed's nominal walk (mm), mean +- std over the trials
     where both stayed upright, and the nominal seed-to-seed spread (the noise floor).
     The walking model is the nominal one: the walk isolates the offsets' share of the
@@ -378,9 +379,10 @@ def estimate_walks(robot, policy: str, true_dq: np.ndarray, estimates: dict, tri
     rows = {c: [] for c in conds}
     spread, upright = [], {c: 0 for c in ("nominal", *conds)}
     for seed in tqdm(range(trials), desc="walks", unit="trial", disable=not progress):
-        nominal = walk(env, runner, seconds, seed, {"offsets": np.zeros(12), "correction": None})
+        none = np.zeros(env.legmap.n_joints)
+        nominal = walk(env, runner, seconds, seed, {"offsets": none, "correction": None})
         upright["nominal"] += nominal.upright
-        s = walk(env, runner, seconds, seed + SPREAD_SEED_OFFSET, {"offsets": np.zeros(12), "correction": None})
+        s = walk(env, runner, seconds, seed + SPREAD_SEED_OFFSET, {"offsets": none, "correction": None})
         if s.upright and nominal.upright:
             spread.append(deviation(s, nominal))
         for c, est in conds.items():

@@ -150,10 +150,11 @@ def evaluate(env, spec: PolicySpec, student: Student, teacher: ZmpWalker, cfg: D
     """The pure student on the fixed selection set."""
     from legcal_bench.sim.offsets import resolve_offsets
 
-    conds = [("none", np.zeros(12)), (f"paper@{cfg.eval_deg:g}", resolve_offsets(f"paper@{cfg.eval_deg:g}", legmap))]
+    n = legmap.n_joints
+    conds = [("none", np.zeros(n)), (f"paper@{cfg.eval_deg:g}", resolve_offsets(f"paper@{cfg.eval_deg:g}", legmap))]
     for i in range(cfg.eval_rollouts):
         r = np.random.default_rng(EVAL_SEED_BASE + 1000 + i)
-        conds.append((f"random#{i}", r.uniform(-1, 1, 12) * np.deg2rad(cfg.offsets_deg)))
+        conds.append((f"random#{i}", r.uniform(-1, 1, n) * np.deg2rad(cfg.offsets_deg)))
     rows = []
     for i, (name, off) in enumerate(conds):
         r = rollout(env, teacher, spec, student, 0.0, EVAL_SEED_BASE + i, off, cfg.seconds, np.random.default_rng(0))
@@ -187,7 +188,7 @@ def train(legmap, recipe: TeacherRecipe, cfg: DistillConfig = DistillConfig(), n
         falls, t0 = 0, _time.perf_counter()
         for j in range(cfg.rollouts):
             seed = TRAIN_SEED_BASE + it * 1000 + j
-            off = rng.uniform(-1, 1, 12) * np.deg2rad(cfg.offsets_deg)
+            off = rng.uniform(-1, 1, legmap.n_joints) * np.deg2rad(cfg.offsets_deg)
             _randomize(env, rng, cfg, nominal)
             r = rollout(env, teacher, spec, None if it == 0 else student, beta, seed, off, cfg.seconds, rng)
             falls += r.fallen_at is not None

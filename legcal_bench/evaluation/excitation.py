@@ -1,7 +1,7 @@
 """A learned excitation policy in miniature: the static env's reward as the objective.
 
 The static double-support env rewards each frame with its information gain about the
-12 offsets (the increase of log det(H_data + εI), `InformationGain`), so an episode's
+offsets, one per leg joint (the increase of log det(H_data + εI), `InformationGain`), so an episode's
 return is the log-determinant of the information its motion collected (less the reset
 frame's): a D-optimal
 design objective that any policy learner can maximize without knowing the calibration.

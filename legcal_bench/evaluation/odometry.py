@@ -77,7 +77,7 @@ def centre_of_pressure(ft: np.ndarray, sole_ft) -> np.ndarray:
 
 def leg_odometry(kin: LegKinematics, q: np.ndarray, loads: np.ndarray, R_WB: np.ndarray, p0: np.ndarray,
                  cop: np.ndarray | None = None) -> np.ndarray:
-    """Base positions (n, 3) from joint angles q (n, 12), per-foot loads (n, 2: left,
+    """Base positions (n, 3) from joint angles q (n, n_joints), per-foot loads (n, 2: left,
     right), base orientations R_WB (n, 3, 3), the initial base position p0 and, if the
     robot measures it, each sole's centre of pressure (n, 2, 3; sole frame), the
     contact point (else the sole's origin, anchored at each change of stance foot)."""

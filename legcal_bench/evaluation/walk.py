@@ -34,7 +34,7 @@ class Walk:
     fallen_at: float | None
     wall_s: float
     privileged: list[str] = field(default_factory=list)  # observation terms read from the simulator
-    q_enc: np.ndarray | None = None  # (n, 12) the encoders the software read (with `log`)
+    q_enc: np.ndarray | None = None  # (n, n_joints) the encoders the software read (with `log`)
     loads: np.ndarray | None = None  # (n, 2) per-foot load: ankle force magnitude (N), else the contact load
     gravity: np.ndarray | None = None  # (n, 3) the IMU filter's gravity direction, base frame
     ang_vel: np.ndarray | None = None  # (n, 3) the gyro's rate, base frame
@@ -63,7 +63,7 @@ def walk(env, runner, seconds: float, seed: int, options: dict | None = None, on
     runner.reset()
     n = int(round(seconds / u.dt))
     t, pelvis = np.empty(n), np.empty((n, 7))
-    logs = {"q_enc": np.empty((n, 12)), "loads": np.empty((n, 2)), "gravity": np.empty((n, 3)),
+    logs = {"q_enc": np.empty((n, u.legmap.n_joints)), "loads": np.empty((n, 2)), "gravity": np.empty((n, 3)),
             "ang_vel": np.empty((n, 3))} if log else {}
     if log and "ft" in u.observation_space.spaces:
         logs["ft"] = np.empty((n, 2, 6))
@@ -126,7 +126,7 @@ def _walk_sim(u, runner, obs, n, t, pelvis, logs):
     sim = u.sim
     d, sc = sim.data, sim.scene
     f, servo, dof = sc.free_qpos_adr, sc.servo[0], sc.dof_adr
-    tau, qvel = np.empty((n, 12)), np.empty((n, 12))
+    tau, qvel = np.empty((n, u.legmap.n_joints)), np.empty((n, u.legmap.n_joints))
     k = 0
     for k in range(n):
         obs = u.advance(runner.act(obs, None, sim.time))
@@ -161,7 +161,7 @@ PATTERN_SEED_BASE = 20_000  # the random:<deg> pattern of trial s comes from def
 
 
 def trial_offsets(spec: str, legmap, seed: int) -> np.ndarray:
-    """The offsets of trial `seed`: a fixed pattern (`paper@3`, 12 radians...) is the
+    """The offsets of trial `seed`: a fixed pattern (`paper@3`, one radian per leg joint...) is the
     same in every trial; `random:<deg>` draws one pattern per trial."""
     from legcal_bench.sim.offsets import resolve_offsets
 
@@ -179,7 +179,7 @@ def walk_trials(env, runner, offsets: str, trials: int, seconds: float = 20.0, c
     u = env.unwrapped
     for seed in tqdm(range(first_seed, first_seed + trials), desc=f"walk {u.legmap.name} {offsets}", unit="trial",
                      disable=not progress):
-        nominal = walk(env, runner, seconds, seed, {"offsets": np.zeros(12), "correction": None})
+        nominal = walk(env, runner, seconds, seed, {"offsets": np.zeros(u.legmap.n_joints), "correction": None})
         dq = trial_offsets(offsets, u.legmap, seed)
         w = walk(env, runner, seconds, seed, {"offsets": dq, "correction": correction})
         dev = deviation(w, nominal) if w.upright and nominal.upright else {}

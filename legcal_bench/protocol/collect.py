@@ -32,7 +32,7 @@ from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.effects import build_reality, floor_stances
 from legcal_bench.sim.hold import HoldReport
-from legcal_bench.sim.offsets import resolve_offsets
+from legcal_bench.sim.offsets import paper_note, resolve_offsets
 from legcal_bench.sim.scene import MODES
 from legcal_bench.sim.sensors import sim_sensors
 
@@ -104,6 +104,9 @@ class CollectSummary:
     segments: list[SegmentSummary] = field(default_factory=list)
     wall_s: float = 0.0
     sim_s: float = 0.0
+    # What the offsets spec leaves out on this robot (`legcal_bench.sim.offsets.paper_note`:
+    # a paper preset's roles the robot lacks, e.g. no ankle roll).
+    notes: list[str] = field(default_factory=list)
 
 
 def _segments(cfg: CollectConfig, rng: np.random.Generator, catalog: dict, stances: tuple[str, ...]):
@@ -181,7 +184,7 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
 
 def pushed_targets(kin, placement, postures: np.ndarray, q_init: np.ndarray, rate_hz: float,
                    rng: np.random.Generator) -> np.ndarray:
-    """(N, 12) the servo targets of a load-varied stance: each posture's IK with the soles
+    """(N, n) the servo targets (n leg joints) of a load-varied stance: each posture's IK with the soles
     displaced by the stance's push (`commanded_soles`); IKError naming the stance if a
     displaced sole is out of reach."""
     left, right = commanded_soles(placement, kin.dims, len(postures), rate_hz, rng)
@@ -203,7 +206,8 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
     if sim.mode == "kinematic" or not failures:
         return report
     sc = sim.scene
-    gains = ", ".join(f"{n} {kp:.0f}" for n, kp in zip(sim.sim_legmap.joint_names[:6], sc.servo_kp[:6]))
+    left = sim.sim_legmap.leg_slice("left")
+    gains = ", ".join(f"{n} {kp:.0f}" for n, kp in zip(sim.sim_legmap.joint_names[left], sc.servo_kp[left]))
     pelvis = report.pelvis_m > report.pelvis_limit_m
     cause = ("the servos are too soft for the robot's weight (it sags or folds)" if pelvis else
              "the posture tips the robot onto a sole edge, or a sole slips")
@@ -254,8 +258,9 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     plan = list(_segments(cfg, np.random.default_rng(ss.spawn(1)[0]), catalog, stances))
     seeds = [int(s.generate_state(1)[0]) for s in ss.spawn(len(plan) + 1)[1:]]
     total = sum(int(round(duration * cfg.rate_hz)) for _, _, _, duration, _, _ in plan)
+    note = paper_note(cfg.offsets, legmap)
     summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names,
-                             servo_gains=gains.to_dict() if gains else {})
+                             servo_gains=gains.to_dict() if gains else {}, notes=[note] if note else [])
     session = f"{legmap.name}-{cfg.mode}-seed{cfg.seed}"
     t0 = time.perf_counter()
 
@@ -316,14 +321,16 @@ def format_summary(s: CollectSummary) -> str:
         f"{s.sim_s / max(s.wall_s, 1e-9):.1f}x real time)",
         "injected offsets (deg): " + ", ".join(
             f"{n.replace('_joint', '')} {np.rad2deg(v):+.3f}" for n, v in zip(s.joint_names, s.offsets_rad)),
+        *s.notes,
     ]
     if s.servo_gains:
         g = s.servo_gains
         lines.append("servo gains kp (N m/rad): " + ", ".join(
-            f"{n.replace('_joint', '')} {kp:.0f} ({src})" for n, kp, src in zip(s.joint_names[:6], g["kp"], g["source"]))
+            f"{n.replace('_joint', '')} {kp:.0f} ({src})"
+            for n, kp, src in zip(s.joint_names[:len(s.joint_names) // 2], g["kp"], g["source"]))  # left leg first
             + f" (left leg; {g['note']})")
     lines.append(f"{'segment':<12} {'kind':<9} {'stance':<9} {'frames':>6} {'max|gyro|':>10} {'sole drift':>18} "
-                 f"{'pelvis':>8} {'fit':>5} {'motion':>6} {'joint range (deg, min..max over 12)':>36}")
+                 f"{'pelvis':>8} {'fit':>5} {'motion':>6} {f'joint range (deg, min..max over {len(s.joint_names)})':>36}")
     for g in s.segments:
         lines.append(
             f"{g.name:<12} {g.kind:<9} {g.stance:<9} {g.frames:>6} {g.max_gyro:>8.3f}/s "

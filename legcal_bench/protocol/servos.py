@@ -39,7 +39,7 @@ PROBE_HOLD_S = 0.5
 
 def default_gains(legmap: LegMap, kin: LegKinematics | None = None,
                   mass: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The documented default (kp, kd) for this robot's 12 leg joints (`mass`: the
+    """The documented default (kp, kd) for this robot's leg joints, by role (`mass`: the
     model's total mass if already known)."""
     kin = LegKinematics(legmap) if kin is None else kin
     mgl = (total_mass(legmap) if mass is None else mass) * GRAVITY * kin.dims.leg_length
@@ -76,8 +76,8 @@ def _choose(legmap: LegMap) -> ServoGains:
     for i in [i for i, s in enumerate(source) if s == "none"]:
         kp[i], kd[i], source[i] = dkp[i], dkd[i], "default"
     if "MJCF" in source:
-        probe = DoubleSupportSim(legmap, "weld", np.zeros(12), sim_sensors("zero"), settle_s=PROBE_SETTLE_S,
-                                 servo_gains=ServoGains(tuple(kp), tuple(kd), tuple(source)))
+        probe = DoubleSupportSim(legmap, "weld", np.zeros(legmap.n_joints), sim_sensors("zero"),
+                                 settle_s=PROBE_SETTLE_S, servo_gains=ServoGains(tuple(kp), tuple(kd), tuple(source)))
         pl = place(fit_stance(STANCES["I"], probe.true_kin).stance, probe.true_kin.dims)
         probe.reset(pl.left, pl.right, pl.nominal)
         n = int(round(PROBE_HOLD_S * probe.rate_hz))

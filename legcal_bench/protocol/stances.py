@@ -251,13 +251,14 @@ def commanded_soles(placement: Placement, dims: RobotDims, n: int, rate_hz: floa
 def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray,
                    q: np.ndarray) -> float | np.ndarray:
     """Distance (m) of the CoM's ground projection inside the convex hull of the eight
-    sole corners; negative outside. `posture` (6,) and `q` (12,) give a float; postures
-    (N, 6) and their joint angles (N, 12) give the (N,) margins."""
+    sole corners; negative outside. `posture` (6,) and `q` (n,) (the n leg joints) give a
+    float; postures (N, 6) and their joint angles (N, n) give the (N,) margins."""
     corners = np.vstack([(T.rotation @ kin.corners[s].T).T + T.translation
                          for s, T in (("left", placement.left), ("right", placement.right))])
     hull = ConvexHull(corners[:, :2])
     T_WB = posture_poses(posture)
-    com = np.einsum("nij,nj->ni", T_WB[:, :2, :3], np.array([kin.com(qk) for qk in np.reshape(q, (-1, 12))]))
+    qs = np.reshape(q, (-1, kin.legmap.n_joints))
+    com = np.einsum("nij,nj->ni", T_WB[:, :2, :3], np.array([kin.com(qk) for qk in qs]))
     com += T_WB[:, :2, 3]
     margins = -(com @ hull.equations[:, :2].T + hull.equations[:, 2]).max(axis=1)
     return float(margins[0]) if np.ndim(posture) == 1 else margins
@@ -265,7 +266,7 @@ def support_margin(kin: LegKinematics, placement: Placement, posture: np.ndarray
 
 class Motion(NamedTuple):
     postures: np.ndarray  # (N, 6)
-    q: np.ndarray  # (N, 12) their joint angles
+    q: np.ndarray  # (N, n) their joint angles (n leg joints)
     scale: float  # the motion's amplitude relative to the stance's
 
 
@@ -276,7 +277,7 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
     is reachable within the joint limits of `kin` and statically balanced (the CoM at
     least a quarter sole width inside the support polygon, checked every fifth frame),
     so any robot gets a stance it can hold on a real floor. Returns the postures (N, 6),
-    with `return_q` a `Motion`: also their joint angles (N, 12) on `kin` (the whole
+    with `return_q` a `Motion`: also their joint angles (N, n) on `kin` (the whole
     trajectory's IK is solved in one batch, `posture_ik`) and the amplitude scale used."""
     margin = 0.25 * kin.dims.sole_width
     base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng, period_scale=period_scale)

@@ -5,7 +5,7 @@ added, beside the clean-data floor.
 Each case collects a session set (weld, `calibrated-imu`, the paper's injection; the
 effect's side alternates with the seed, the leg-length effect's link too), calibrates it
 (`interfoot`, `sensor` setting, `--with-effects <effect>`), and scores:
-  offsets    RMS error of the 12 offsets (deg), offsets-only and with the effect;
+  offsets    RMS error of the offsets, one per leg joint (deg), offsets-only and with the effect;
   heldout    RMS foot-height difference (mm) on the held-out sessions at their true
              postures: the noise-free encoder readings (truth `q_enc_clean`) through the
              model as fitted (offsets-only: nominal kinematics; with the effect: its
@@ -87,8 +87,9 @@ def run_case(robot: str, effect: str | None, seed: int, stances: tuple[str, ...]
         eff = result.diagnostics.get("effects")
         before = after if eff is None else np.array([eff["offsets_only_rad"][n] for n in names])
         model = EffectModel(LegKinematics(legmap), load_effects([] if effect is None else [effect]))
-        x_after = np.r_[after, [eff["parameters"][n]["value"] for n in model.names[12:]]] if eff else after
-        x_before = np.r_[before, np.zeros(model.n - 12)]
+        nj = legmap.n_joints  # the model's parameters: the offsets, then the effect's
+        x_after = np.r_[after, [eff["parameters"][n]["value"] for n in model.names[nj:]]] if eff else after
+        x_before = np.r_[before, np.zeros(model.n - nj)]
         heights = heldout_heights(legmap, paths, [] if effect is None else [effect],
                                   {"before": x_before, "after": x_after})
         std = result.diagnostics["posterior"]["std_rad"] if eff is None else eff["offsets_std_rad"]

@@ -44,7 +44,7 @@ import pinocchio as pin
 from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
-from legcal_bench.robots.kinematics import LegKinematics, solve_standing
+from legcal_bench.robots.kinematics import LegKinematics, reachable_postures, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
@@ -54,16 +54,23 @@ GRAVITY = np.array([0.0, 0.0, -9.81])
 
 
 def posture_ik(kin: LegKinematics, left: pin.SE3, right: pin.SE3, postures: np.ndarray,
-               q_init: np.ndarray | None = None) -> np.ndarray:
+               q_init: np.ndarray | None = None, with_postures: bool = False):
     """Closed-chain IK (within joint limits) of each posture (N, 6) with the soles at
-    `left`/`right` (stance frame): (N, 12), in one batch (`kin.solve_batch`). The first
+    `left`/`right` (stance frame): (N, n), in one batch (`kin.solve_batch`). The first
     frame starts from `q_init` (default `kin.q_init()`), the others from its solution, as
-    a sequence of `kin.solve` calls starts each from a nearby one. Raises IKError with
-    the failing frames in `.frames`."""
+    a sequence of `kin.solve` calls starts each from a nearby one. Legs of fewer than six
+    joints cannot hold every pelvis pose with both soles flat: each posture is replaced
+    by the nearest one they reach (`reachable_postures`) before the batch. With
+    `with_postures`, returns (q, the postures solved for). Raises IKError with the
+    failing frames in `.frames`."""
+    postures = np.asarray(postures, dtype=float).reshape(-1, 6)
+    if kin.leg_joints < 6:
+        postures = reachable_postures(kin, left, right, postures, q_init)[0]
     T_BW = inverse(posture_poses(postures))
     T_left, T_right = T_BW @ left.homogeneous, T_BW @ right.homogeneous
     q0 = kin.solve_batch(T_left[:1], T_right[:1], q_init)[0]
-    return kin.solve_batch(T_left, T_right, q0)  # frame 0 is already solved: it stays q0
+    q = kin.solve_batch(T_left, T_right, q0)  # frame 0 is already solved: it stays q0
+    return (q, postures) if with_postures else q
 
 
 class DoubleSupportSim:
@@ -79,8 +86,8 @@ class DoubleSupportSim:
         self.legmap = legmap
         self.sim_legmap = legmap if sim_legmap is None else sim_legmap
         if self.sim_legmap.joint_names != legmap.joint_names:
-            raise LegMapError("sim_robot: the simulated robot must have the same 12 leg joint names, in the same "
-                              f"order, as the nominal robot ({legmap.joint_names})")
+            raise LegMapError(f"sim_robot: the simulated robot must have the same {legmap.n_joints} leg joint names, "
+                              f"in the same order, as the nominal robot ({legmap.joint_names})")
         self.mode = mode
         self.nominal = LegKinematics(legmap)
         # A distinct simulated model whenever the simulated robot differs (a shim included):
@@ -198,11 +205,11 @@ class DoubleSupportSim:
 
     def solve_postures(self, postures: np.ndarray, kin: LegKinematics | None = None) -> np.ndarray:
         """`posture_ik` for the current soles with `kin` (default the nominal model),
-        starting from the current solution: (N, 12), a row of NaN for each posture out of
+        starting from the current solution: (N, n), a row of NaN for each posture out of
         reach or past a joint limit (which `step` then reports as unreachable)."""
         kin = self.nominal if kin is None else kin
         postures = np.asarray(postures, dtype=float).reshape(-1, 6)
-        q = np.full((len(postures), 12), np.nan)
+        q = np.full((len(postures), self.legmap.n_joints), np.nan)
         todo = np.arange(len(postures))
         true = kin is self.true_kin
         start = self._q_true if true else self._q_cmd
@@ -220,7 +227,7 @@ class DoubleSupportSim:
         """`step` through `postures` (N, 6), observing after each: (observations, ground
         truth), each stacked over the N frames: what `step`, `observe` and `truth` give
         frame by frame, with the same random draws (equal to rounding: batched and
-        sequential IK agree to ~1e-13). `q_cmd` (N, 12) is the postures' nominal IK
+        sequential IK agree to ~1e-13). `q_cmd` (N, n) is the postures' nominal IK
         (`posture_ik`; rows of NaN are solved by `step`); in kinematic mode the simulated
         robot's IK is solved here in one batch (or taken from `q_cmd` when the simulated
         robot is the nominal one)."""
@@ -361,27 +368,29 @@ class DoubleSupportSim:
     def _sense(self, buf: dict[str, np.ndarray], rng: np.random.Generator) -> dict[str, np.ndarray]:
         """`observe` of every frame recorded in `buf` (`_record`), in one pass: the
         random draws of all frames at once, each frame's in `observe`'s order (IMU 3 + 3,
-        encoders 12, force/torque 12), so the same numbers as frame by frame."""
+        encoders one per leg joint, force/torque 2 x 6), so the same numbers as frame by frame."""
         n, sen = len(buf["time"]), self.sensor
-        noise = rng.standard_normal((n, 18 + (12 if self.has_ft else 0)))
+        enc = slice(6, 6 + self.legmap.n_joints)  # after the IMU's 3 + 3
+        noise = rng.standard_normal((n, enc.stop + (12 if self.has_ft else 0)))
         imu = sen.imu_samples(np.stack([buf["imu_true_acc"], buf["imu_true_gyro"]], axis=1), noise[:, :6])
-        obs = {"q_enc": sen.encoders(buf["q_motor"] - self.offsets, rng, noise[:, 6:18]),
+        obs = {"q_enc": sen.encoders(buf["q_motor"] - self.offsets, rng, noise[:, enc]),
                "imu_acc": np.ascontiguousarray(imu[:, 0]), "imu_gyro": np.ascontiguousarray(imu[:, 1])}
         if self.has_ft:
-            obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, 18:].reshape(n, 2, 6))
+            obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, enc.stop:].reshape(n, 2, 6))
         return obs
 
     # ------------------------------------------------------------ ground truth
     # A frame's raw state goes into preallocated arrays (`_record`); `_truth` converts
     # any number of frames at once (poses to [x y z qw qx qy qz], sole drift).
     def _buffers(self, n: int) -> dict[str, np.ndarray]:
-        buf = {"time": np.empty(n), "q_true": np.empty((n, 12)), "q_motor": np.empty((n, 12)),
+        nj = self.legmap.n_joints
+        buf = {"time": np.empty(n), "q_true": np.empty((n, nj)), "q_motor": np.empty((n, nj)),
                "posture": np.empty((n, 6)),
                "posture_reachable": np.empty(n, dtype=bool), "imu_true_acc": np.empty((n, 3)),
                "imu_true_gyro": np.empty((n, 3))}
         if self.mode != "kinematic":
             buf.update(sole_pos=np.empty((n, 2, 3)), sole_rot=np.empty((n, 2, 9)),
-                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, 12)))
+                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, nj)))
         if self.has_ft:
             buf["ft"] = np.empty((n, 2, 6))  # the ankle sensors' true wrenches
         return buf

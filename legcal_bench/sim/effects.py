@@ -115,12 +115,12 @@ def floor_stances(floor: dict) -> set[str]:
 
 def joint_label(legmap: LegMap, index: int) -> str:
     """`left_knee`-style name of leg joint `index` (side and role)."""
-    return f"{SIDES[index // 6]}_{legmap.joint_roles[index]}"
+    return f"{legmap.side_of(index)}_{legmap.joint_roles[index]}"
 
 
 def _resolve_joint(legmap: LegMap, text: str | None, rng, spec: str, roles=None) -> int:
-    labels = [joint_label(legmap, i) for i in range(12)]
-    allowed = [i for i in range(12) if roles is None or legmap.joint_roles[i] in roles]
+    labels = [joint_label(legmap, i) for i in range(legmap.n_joints)]
+    allowed = [i for i in range(legmap.n_joints) if roles is None or legmap.joint_roles[i] in roles]
     if text is None:
         return int(rng.choice(allowed))
     if text in labels and labels.index(text) in allowed:
@@ -162,7 +162,7 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
     effects = [parse_effect(s) for s in specs]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 16]))
     mount = np.array(sensors.errors.imu_mount_rpy)
-    scale = np.array(sensors.encoder_scale if sensors.encoder_scale else np.zeros(12))
+    scale = np.array(sensors.encoder_scale if sensors.encoder_scale else np.zeros(legmap.n_joints))
     floor, truth, edits = {}, [], []
     for e in effects:
         v = e.values
@@ -238,7 +238,7 @@ def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
     m = mjcf.from_path(str(legmap.mjcf))
     compiled = mujoco.MjModel.from_xml_path(str(legmap.mjcf))
     model, data = kin.model, kin.data
-    pin.forwardKinematics(model, data, kin.q_full(np.zeros(12)))
+    pin.forwardKinematics(model, data, kin.q_full(np.zeros(legmap.n_joints)))
     pin.updateFramePlacements(model, data)
 
     def body_rotation(name: str) -> np.ndarray:

@@ -39,7 +39,7 @@ EFFECTS_HELP = ("NAME:key=value,... with NAME one of " + "; ".join(
     f"{k.name} ({', '.join(k.keys)}: {k.help})" for k in KINDS.values()))
 
 # legcal_bench.sim.offsets parses these.
-PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | twelve comma-separated radians "
+PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | one radian per leg joint, comma-separated "
                 "(leg-map order)")
 
 # legcal_bench.sim.sensors.SENSOR_PRESETS, in this order: every effect off; an

@@ -12,7 +12,7 @@ import numpy as np
 
 from legcal_bench.errors import OffsetSpecError
 from legcal_bench.paper import A2_BASE_DEG, A2_PLATFORM_ORDER, A3_BASE_DEG, A3_PLATFORM_ORDER, INJECTION_RAD
-from legcal_bench.robots.legmap import LegMap
+from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.names import PRESETS_HELP
 
 
@@ -23,25 +23,54 @@ def _physical_signs(legmap: LegMap) -> np.ndarray:
 
 
 def paper_injection(legmap: LegMap) -> np.ndarray:
-    """The paper's injection (rad) on this robot's 12 leg joints, by role, each signed by
-    its axis against the role's pelvis axis (`LegKinematics.physical_signs`): the same
-    physical pattern on every robot, a mirrored axis's joint included."""
+    """The paper's injection (rad) on this robot's leg joints (`legmap.n_joints`), by role,
+    each signed by its axis against the role's pelvis axis (`LegKinematics.physical_signs`):
+    the same physical pattern on every robot, a mirrored axis's joint included. A role the
+    robot lacks (`legmap.absent_roles`, e.g. no ankle roll) has no joint and gets nothing
+    (`paper_note` says so)."""
     return np.array([INJECTION_RAD[r] for r in legmap.joint_roles]) * _physical_signs(legmap)
+
+
+def _paper_table(legmap: LegMap) -> tuple[tuple[str, ...], tuple[float, ...]]:
+    """The paper's base-offset table (Table II) this robot takes: the A3's for a
+    hip-pitch-first ordering, the A2's otherwise; (platform role order per leg, degrees
+    left leg then right)."""
+    if legmap.hip_order[0] == "hip_pitch":
+        return A3_PLATFORM_ORDER, A3_BASE_DEG
+    return A2_PLATFORM_ORDER, A2_BASE_DEG
 
 
 def paper_base(legmap: LegMap) -> np.ndarray:
     """The paper's real robots' base offsets (Table II, rad) on this robot, by role: the
-    A3's for a hip-pitch-first ordering, the A2's otherwise; signed as `paper_injection`."""
-    if legmap.hip_order[0] == "hip_pitch":
-        order, table = A3_PLATFORM_ORDER, A3_BASE_DEG
+    A3's for a hip-pitch-first ordering, the A2's otherwise; signed as `paper_injection`.
+    A role the robot lacks has no joint, and its table entry is left out."""
+    order, table = _paper_table(legmap)
+    per_leg = len(order)  # the paper's platforms: one table entry per role and leg
+    by_role = {(side, role): table[k * per_leg + j] for k, side in enumerate(SIDES) for j, role in enumerate(order)}
+    out = np.array([by_role[legmap.side_of(i), role] for i, role in enumerate(legmap.joint_roles)])
+    return np.deg2rad(out) * _physical_signs(legmap)
+
+
+def paper_note(spec: str | np.ndarray | Sequence[float], legmap: LegMap) -> str | None:
+    """What a paper preset (`paper`, `paper@<deg>`, `paper-base`) leaves out on this robot:
+    the paper's roles the robot lacks (`legmap.absent_roles`), whose offsets have no joint
+    to go to; None for other specs or a robot with every role."""
+    if not isinstance(spec, str) or not legmap.absent_roles:
+        return None
+    s = spec.strip()
+    if s not in ("paper", "paper-base") and not s.startswith("paper@"):
+        return None
+    if s == "paper-base":
+        order, table = _paper_table(legmap)
+        per_leg = len(order)
+        left_out = ", ".join(f"{role} ({table[order.index(role)]:+.3f}° left, {table[per_leg + order.index(role)]:+.3f}° "
+                             "right)" for role in legmap.absent_roles)
+    elif s == "paper":
+        left_out = ", ".join(f"{role} ({np.rad2deg(INJECTION_RAD[role]):+.2f}°)" for role in legmap.absent_roles)
     else:
-        order, table = A2_PLATFORM_ORDER, A2_BASE_DEG
-    sides = list(legmap.legs)
-    out = np.empty(12)
-    for i, (name, role) in enumerate(zip(legmap.joint_names, legmap.joint_roles)):
-        side = next(k for k, s in enumerate(sides) if name in [j.name for j in legmap.legs[s].joints])
-        out[i] = np.deg2rad(table[6 * side + order.index(role)])
-    return out * _physical_signs(legmap)
+        left_out = ", ".join(legmap.absent_roles)
+    return (f"offsets {s}: robot {legmap.name} has no {', '.join(legmap.absent_roles)} joint; the paper's offsets "
+            f"for {left_out} are not injected ({legmap.n_joints} leg joints)")
 
 
 def _degrees(spec: str, prefix: str, example: str) -> float:
@@ -57,19 +86,23 @@ def _degrees(spec: str, prefix: str, example: str) -> float:
 
 def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
                     rng: np.random.Generator | None = None) -> np.ndarray:
-    """The 12-vector of offsets (rad) for `spec`; `random:<deg>` draws from `rng`
-    uniformly in [-deg, +deg] per joint."""
+    """The vector of offsets (rad, one per leg joint: `legmap.n_joints`) for `spec`;
+    `random:<deg>` draws from `rng` uniformly in [-deg, +deg] per joint. A paper preset
+    on a robot lacking one of the paper's roles: `paper_note` says what is left out."""
+    n = legmap.n_joints
     if not isinstance(spec, str):
         try:
             v = np.asarray(spec, dtype=float).reshape(-1)
         except (TypeError, ValueError):
-            raise OffsetSpecError(f"offsets: expected 12 numbers in radians, got {spec!r}") from None
-        if v.size != 12 or not np.all(np.isfinite(v)):
-            raise OffsetSpecError(f"offsets: expected 12 finite values in radians, got {v.size}")
+            raise OffsetSpecError(f"offsets: expected {n} numbers in radians (one per leg joint of {legmap.name}), "
+                                  f"got {spec!r}") from None
+        if v.size != n or not np.all(np.isfinite(v)):
+            raise OffsetSpecError(f"offsets: expected {n} finite values in radians (one per leg joint of "
+                                  f"{legmap.name}), got {v.size}")
         return v
     s = spec.strip()
     if s == "none":
-        return np.zeros(12)
+        return np.zeros(n)
     if s == "paper":
         return paper_injection(legmap)
     if s == "paper-base":
@@ -81,9 +114,9 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
         deg = _degrees(spec, "random:", "1.5")
         if rng is None:
             raise OffsetSpecError("offsets random:<deg> needs a seeded generator")
-        return rng.uniform(-1, 1, 12) * np.deg2rad(deg)
+        return rng.uniform(-1, 1, n) * np.deg2rad(deg)
     parts = s.split(",")
-    if len(parts) == 12:
+    if len(parts) == n:
         try:
             return resolve_offsets([float(p) for p in parts], legmap)
         except ValueError:

@@ -35,7 +35,7 @@ WELD_TORQUESCALE = 10.0
 
 @dataclass(frozen=True)
 class ServoGains:
-    """Servo gains for the 12 leg joints (leg-map order) and where each came from."""
+    """Servo gains for the leg joints (leg-map order) and where each came from."""
 
     kp: tuple[float, ...]  # N m/rad
     kd: tuple[float, ...]  # N m s/rad
@@ -51,8 +51,8 @@ class Scene:
     model: mujoco.MjModel
     legmap: LegMap
     mode: str
-    qpos_adr: np.ndarray  # (12,) leg joints
-    dof_adr: np.ndarray  # (12,)
+    qpos_adr: np.ndarray  # (n,) leg joints (`legmap.n_joints`)
+    dof_adr: np.ndarray  # (n,)
     free_qpos_adr: int  # pelvis free joint (position 3 + quaternion wxyz 4)
     pelvis_body: int
     sole_site: dict[str, int]
@@ -76,10 +76,11 @@ class Scene:
     def _layout(self) -> None:
         pa, ma = self.position_act >= 0, self.motor_act >= 0
         act, cols = self.position_act[pa], np.flatnonzero(pa)
-        # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + 12] = target.
-        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + 12))
+        # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + n] = target.
+        n = len(self.position_act)
+        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + n))
         self.servo = (
-            slice(int(act[0]), int(act[0]) + 12) if contiguous else act, None if contiguous else cols,
+            slice(int(act[0]), int(act[0]) + n) if contiguous else act, None if contiguous else cols,
             (self.motor_act[ma], np.flatnonzero(ma), self.qpos_adr[ma], self.dof_adr[ma], self.servo_kp[ma],
              self.servo_kd[ma], self.motor_gear[ma]) if ma.any() else None)
 
@@ -190,9 +191,10 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_SENSOR, i)
         if name and name.startswith("legcal_"):
             sensor_adr[name[len("legcal_"):]] = int(model.sensor_adr[i])
-    position_act = -np.ones(12, dtype=int)
-    motor_act = -np.ones(12, dtype=int)
-    gear = np.ones(12)
+    nj = legmap.n_joints
+    position_act = -np.ones(nj, dtype=int)
+    motor_act = -np.ones(nj, dtype=int)
+    gear = np.ones(nj)
     for a in range(model.nu):
         if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] not in joints:
             continue
@@ -207,7 +209,7 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
     # Servo gains per leg joint: the leg map's servo_gains override the MJCF's position
     # actuators; a torque motor without leg-map gains has none yet (NaN, source "none":
     # `legcal_bench.protocol.servos` gives it the default).
-    kp, kd = np.full(12, np.nan), np.full(12, np.nan)
+    kp, kd = np.full(nj, np.nan), np.full(nj, np.nan)
     source = []
     for k, name in enumerate(legmap.joint_names):
         a = position_act[k]
@@ -241,7 +243,7 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
 
 
 def set_servo_gains(scene: Scene, kp: np.ndarray, kd: np.ndarray, source: tuple[str, ...]) -> None:
-    """Use gains `kp`, `kd` (12,) on the leg joints: written into the model's position
+    """Use gains `kp`, `kd` (n,) on the n leg joints: written into the model's position
     actuators (gain kp, bias -kp q - kd qdot), kept for the torque motors' PD law. Joints
     with NaN gains keep none (a motor without gains cannot be driven: `apply_servos`
     refuses it)."""

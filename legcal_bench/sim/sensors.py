@@ -135,7 +135,7 @@ class SimSensors:
 
     model: SensorModel = SensorModel()
     errors: ImuErrors = ImuErrors()
-    # Realized encoder scale errors (12, leg-map order; empty = none): an encoder reads
+    # Realized encoder scale errors (one per leg joint, leg-map order; empty = none): an encoder reads
     # (q - offset) / (1 + scale), so q = q_enc + scale q_enc + offset (issue #16's effect).
     encoder_scale: tuple[float, ...] = ()
 

@@ -75,10 +75,12 @@ class WalkingConfig:
     jitter_yaw_rad: float = 0.02  # initial heading, uniform +-
 
     def __post_init__(self):
+        n = np.shape(self.default_q)[0] if np.ndim(self.default_q) == 1 else None  # the robot's leg joints
         for name in ("kp", "kd", "default_q"):
             v = np.asarray(getattr(self, name), dtype=float)
-            if v.shape != (12,) or not np.isfinite(v).all():
-                raise ConfigError(f"walking config: '{name}' must be 12 finite numbers (leg-map order), got {v.shape}")
+            if n is None or v.shape != (n,) or not n or not np.isfinite(v).all():
+                raise ConfigError(f"walking config: '{name}' must be finite numbers, one per leg joint (leg-map "
+                                  f"order) as default_q gives, got {v.shape}")
         if self.physics_dt <= 0 or self.decimation < 1:
             raise ConfigError("walking config: physics_dt must be > 0 and decimation >= 1")
 
@@ -91,11 +93,14 @@ def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
     """The robot's MJCF on the walking floor, its leg actuators replaced by position
     servos (gain kp, bias -kp q - kd qdot: PD at physics rate inside MuJoCo's step) with
     the robot's torque limits (or `cfg.torque_limit`), and `cfg`'s model additions."""
+    if len(cfg.default_q) != legmap.n_joints:
+        raise ConfigError(f"walking config: {len(cfg.default_q)} joint values (kp, kd, default_q) but robot "
+                          f"{legmap.name} has {legmap.n_joints} leg joints")
     m = mjcf.from_path(str(legmap.mjcf))
     m.option.timestep = cfg.physics_dt
     if cfg.integrator is not None:
         m.option.integrator = cfg.integrator
-    limits = np.full(12, np.inf)
+    limits = np.full(legmap.n_joints, np.inf)
     leg = set(legmap.joint_names)
     for act in list(m.actuator.all_children()):
         joint = getattr(act, "joint", None)
@@ -158,10 +163,14 @@ class WalkingSim:
         self._foot_geom_lists = tuple(self._foot_bodies[s].tolist() for s in SIDES)
         self._dq_sigma = np.sqrt(2) * sensor.model.encoder_noise_std / config.physics_dt
         self._up_g = np.array([0.0, 0.0, 9.81])
-        self._n_noise = 36 + (12 if sc.has_ft else 0)  # standard normal draws per `observe`
+        # Standard normal draws per `observe`: encoders and joint velocities (one per leg
+        # joint each), the IMU (3 + 3, twice), force/torque (2 x 6).
+        nj = legmap.n_joints
+        self._noise_at = {"q_enc": slice(0, nj), "dq_enc": slice(nj, 2 * nj), "imu": slice(2 * nj, 2 * nj + 12)}
+        self._n_noise = 2 * nj + 12 + (12 if sc.has_ft else 0)
         self._imu4 = np.empty((4, 3))  # the IMU's two samples per `observe`: [acc, gyro] now, over the step
-        self.offsets = np.zeros(12)
-        self.correction = np.zeros(12)
+        self.offsets = np.zeros(nj)
+        self.correction = np.zeros(nj)
 
     def _subtree(self, body: int) -> np.ndarray:
         m = self.model
@@ -183,7 +192,7 @@ class WalkingSim:
         self.correction = np.asarray(correction, dtype=float).copy()
         mujoco.mj_resetData(m, d)
         target = np.asarray(cfg.default_q)
-        d.qpos[sc.qpos_adr] = self._true_target(target) + rng.uniform(-1, 1, 12) * cfg.jitter_q_rad
+        d.qpos[sc.qpos_adr] = self._true_target(target) + rng.uniform(-1, 1, len(target)) * cfg.jitter_q_rad
         yaw = rng.uniform(-1, 1) * cfg.jitter_yaw_rad
         f = sc.free_qpos_adr
         d.qpos[f:f + 3] = 0.0
@@ -239,22 +248,24 @@ class WalkingSim:
 
     def observe(self, rng: np.random.Generator) -> dict[str, np.ndarray]:
         """What the robot's software reads now (corrected encoders). Random draws, in
-        order: encoders (12), joint velocities (12), the IMU now (accelerometer 3, gyro
-        3), the filter's IMU sample over the step (3 + 3), force/torque (12); drawn at
+        order: encoders (one per leg joint), joint velocities (one per leg joint), the IMU
+        now (accelerometer 3, gyro 3), the filter's IMU sample over the step (3 + 3),
+        force/torque (2 x 6); drawn at
         once (the same numbers), the IMU's two samples read in one call."""
         sc, d, sen = self.scene, self.data, self.sensor
         noise = rng.standard_normal(self._n_noise)
-        q_enc = sen.encoders(d.qpos[sc.qpos_adr] - self.offsets, rng, noise[:12])
-        dq = d.qvel[sc.dof_adr] + self._dq_sigma * noise[12:24]
+        at = self._noise_at
+        q_enc = sen.encoders(d.qpos[sc.qpos_adr] - self.offsets, rng, noise[at["q_enc"]])
+        dq = d.qvel[sc.dof_adr] + self._dq_sigma * noise[at["dq_enc"]]
         imu = self._imu4
         imu[:2] = d.sensordata[self._imu_adr].reshape(2, 3)  # `_true_imu`
         imu[2], imu[3] = self._imu_mean
-        acc, gyro, acc_mean, gyro_mean = sen.imu_samples(imu, noise[24:36])
+        acc, gyro, acc_mean, gyro_mean = sen.imu_samples(imu, noise[at["imu"]])
         down_I = self.filter.update(acc_mean, gyro_mean, self.config.control_dt)
         obs = {"q_enc": q_enc + self.correction, "dq_enc": dq, "imu_acc": acc, "imu_gyro": gyro,
                "gravity": self.R_BI @ down_I}
         if self._ft_adr is not None:
-            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng, noise[36:].reshape(2, 6))
+            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng, noise[at["imu"].stop:].reshape(2, 6))
         return obs
 
     # ------------------------------------------------------------ ground truth
@@ -328,5 +339,5 @@ class WalkingSim:
 
 def servo_power(tau: np.ndarray, qvel: np.ndarray) -> np.ndarray:
     """Mechanical power of the leg servos (W), sum |tau * qdot| over the last axis: one
-    step's (12,) or many steps' (n, 12) at once."""
+    step's (n_joints,) or many steps' (n, n_joints) at once."""
     return np.abs(tau * qvel).sum(axis=-1)

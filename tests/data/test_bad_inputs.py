@@ -124,7 +124,8 @@ def test_sensor_model_fields_are_checked(field, value):
     (dict(meta=lambda m: m.update(kind="walking")), r"field 'kind' is 'walking'; use one of"),
     (dict(meta=lambda m: m.update(format="rosbag")), r"field 'format' is 'rosbag'"),
     (dict(meta=lambda m: m.update(version=2)), r"format version 2 is not supported"),
-    (dict(meta=lambda m: m.update(joint_names=m["joint_names"][:11])), r"must list the 12 leg joints, got 11"),
+    (dict(meta=lambda m: m.update(joint_names=m["joint_names"][:11])), r"must list the robot's leg joints, left leg "
+                                                                        r"then right \(the same number per leg\), got 11"),
     (dict(meta=lambda m: m.update(name=["stance"])), r"metadata field 'name' must be a string"),
     (dict(meta=lambda m: m.update(sensor_model={"gyro_noise": 0.1})), r"unknown fields \['gyro_noise'\]"),
 ])
@@ -358,6 +359,17 @@ def test_bad_ground_truth_is_refused_by_score(session, a3_result, tmp_path, edit
 
 
 # -------------------------------------------------------------- arrays and metadata
+def test_a_recording_with_another_joint_count_is_refused_naming_the_robots(session, tmp_path):
+    path = tmp_path / "stance_I.npz"
+    shutil.copy(session / "stance_I.npz", path)
+    names = load_robot("a3").joint_names
+    with pytest.raises(RecordingError, match=f"must list the robot's {len(names) - 2} leg joints, got {len(names)}"):
+        load_recording(path, names[1:len(names) // 2] + names[len(names) // 2 + 1:])
+    _rewrite(path, arrays=lambda a: a.update(q_enc=a["q_enc"][:, :-2]))
+    with pytest.raises(RecordingError, match=rf"expected \(N, {len(names)}\): one column per leg joint"):
+        load_recording(path, names)
+
+
 def test_joint_names_in_another_order_are_refused_with_the_fix(session, tmp_path):
     path = tmp_path / "stance_I.npz"
     shutil.copy(session / "stance_I.npz", path)
