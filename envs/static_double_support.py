@@ -68,7 +68,7 @@ from legcal_bench.envs.base import MujocoEnv
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.estimation.information.gain import InformationGain
 from legcal_bench.protocol.servos import servo_gains
-from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, place, posture_bounds
+from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, place, posture_bounds, settle
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -136,9 +136,9 @@ class StaticDoubleSupportEnv(MujocoEnv):
         name = options.get("stance", "I")
         if name not in ALL_STANCES:
             raise ConfigError(f"reset option stance={name!r}: use one of {list(ALL_STANCES)}")
-        self.placement = place(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin.dims,
-                               self.np_random,
-                               float(options.get("jitter_m", 0.015)), float(options.get("jitter_rad", 0.05)))
+        self.placement = settle(place(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin.dims,
+                                      self.np_random, float(options.get("jitter_m", 0.015)),
+                                      float(options.get("jitter_rad", 0.05))), self.sim.true_kin)
         self.sim.reset(self.placement.left, self.placement.right, self.placement.nominal, standing=name == "standing")
         obs = self.sim.observe(self.np_random)
         if self._information is not None:

@@ -26,7 +26,8 @@ from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, commanded_soles,
-                                          feasible_trajectory, fit_stance, load_protocol, place, posture_bounds)
+                                          feasible_trajectory, fit_stance, load_protocol, place, posture_bounds,
+                                          settle, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -104,8 +105,9 @@ class CollectSummary:
     segments: list[SegmentSummary] = field(default_factory=list)
     wall_s: float = 0.0
     sim_s: float = 0.0
-    # What the offsets spec leaves out on this robot (`legcal_bench.sim.offsets.paper_note`:
-    # a paper preset's roles the robot lacks, e.g. no ankle roll).
+    # What the session set leaves out on this robot: a paper preset's roles it lacks
+    # (`legcal_bench.sim.offsets.paper_note`), default stances its legs cannot stand in
+    # (`legcal_bench.protocol.stances.stances_for`).
     notes: list[str] = field(default_factory=list)
 
 
@@ -154,7 +156,7 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
     fitted = fit_stance(catalog[stance], sim.nominal)
     for attempt in range(PLACEMENT_TRIES):
         # A jittered placement out of reach is drawn again (the built-ins never need to).
-        placement = place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad)
+        placement = settle(place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad), sim.true_kin)
         try:
             sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing",
                       stance=stance if stance_session else None)
@@ -250,6 +252,9 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
         reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor)
     catalog, stances = stance_catalog(cfg)
+    left_out: list[str] = []
+    if cfg.protocol is None and tuple(cfg.stances) == CollectConfig.stances:  # the default protocol
+        stances, left_out = stances_for(sim.nominal, catalog, stances)
     unknown = sorted(floor_stances(reality.floor) - set(stances))
     if unknown:
         raise ConfigError(f"--effect shim:...,stance={unknown[0]}: stance {unknown[0]!r} is not recorded; "
@@ -260,7 +265,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     total = sum(int(round(duration * cfg.rate_hz)) for _, _, _, duration, _, _ in plan)
     note = paper_note(cfg.offsets, legmap)
     summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names,
-                             servo_gains=gains.to_dict() if gains else {}, notes=[note] if note else [])
+                             servo_gains=gains.to_dict() if gains else {}, notes=([note] if note else []) + left_out)
     session = f"{legmap.name}-{cfg.mode}-seed{cfg.seed}"
     t0 = time.perf_counter()
 

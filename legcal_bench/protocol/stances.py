@@ -22,7 +22,8 @@ from scipy.spatial import ConvexHull
 from legcal_bench.errors import IKError
 from legcal_bench.geometry.lie import Exp, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
-from legcal_bench.robots.kinematics import LegKinematics, RobotDims
+from legcal_bench.robots.kinematics import LegKinematics, RobotDims, holdable_postures, reachable_postures
+from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.double_support import posture_ik
 
 
@@ -153,8 +154,8 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
             stance, left_x=stance.left_x * s, right_x=stance.right_x * s, extra_width=stance.extra_width * s,
             toe_out=stance.toe_out * s, depth=max(stance.depth * s, min(MIN_DEPTH, stance.depth)))
         pl = place(fitted, kin.dims)
-        T_BW = inverse(posture_poses(pl.nominal))
         try:
+            T_BW = inverse(posture_poses(holdable_postures(kin, pl.left, pl.right, pl.nominal)))
             q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
         except IKError:
             continue
@@ -162,10 +163,34 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
         if not outside.any():
             return FittedStance(fitted, float(s))
         worst = [kin.legmap.joint_names[i] for i in np.flatnonzero(outside)]
-    raise IKError(f"stance {stance.name} ({stance.label}) does not fit this robot even shrunk to "
+    lacking = kin.legmap.absent_roles if not worst else ()
+    err = IKError(f"stance {stance.name} ({stance.label}) does not fit this robot even shrunk to "
                   f"{FIT_SCALES[-1]:g} of its size" + (f" (joints at their limits: {worst})" if worst else "")
+                  + (f"; its legs have no {', '.join(lacking)} (absent_roles), and no pelvis posture puts both "
+                     "soles flat at this stance's placement" if lacking else "")
                   + "; record the other stances (--stances), or widen the joints' ranges in the MJCF if the real "
                   "robot allows it")
+    err.lacking_roles = lacking  # what the stance needs that the robot lacks (empty: joint limits)
+    raise err
+
+
+def stances_for(kin: LegKinematics, catalog: dict, names: tuple[str, ...]) -> tuple[tuple[str, ...], list[str]]:
+    """(the stances of `names` the robot can stand in, a note per one left out): a stance
+    is left out only when the robot's legs lack what it needs (a wide squat needs ankle
+    roll to keep the soles flat: `absent_roles`); one that does not fit for joint limits
+    raises IKError as `fit_stance` does."""
+    kept, notes = [], []
+    for name in names:
+        try:
+            if name != "standing":
+                fit_stance(catalog[name], kin)
+            kept.append(name)
+        except IKError as e:
+            if not getattr(e, "lacking_roles", ()):
+                raise
+            notes.append(f"stance {name} ({catalog[name].label}) left out: legs without "
+                         f"{', '.join(e.lacking_roles)} cannot keep both soles flat in it")
+    return tuple(kept), notes
 
 
 @dataclass(frozen=True)
@@ -176,6 +201,47 @@ class Placement:
     left: pin.SE3
     right: pin.SE3
     nominal: np.ndarray  # posture [x, y, z, roll, pitch, yaw]
+
+
+def settle(placement: "Placement", kin: LegKinematics) -> "Placement":
+    """`placement` where the robot can stand on it with both soles flat: as placed for
+    legs of six joints. A leg without ankle roll stands flat only with its sole under its
+    hip, at the leg's own yaw: for shorter legs the soles keep their fore-aft jitter,
+    lose the sideways and yaw jitter, and the right sole is then slid in the floor plane
+    by the least amount that lets both legs reach (`reachable_postures` with `slide`;
+    none for the built-in stances), with the nominal posture the robot holds."""
+    if kin.reaches_any_sole_pose:
+        return placement
+    st, L = placement.stance, kin.dims.leg_length
+    fore_aft = [placement.left.translation[0] - st.left_x * L, placement.right.translation[0] - st.right_x * L]
+    placement = _placement(st, kin.dims, [np.array([dx, 0.0, 0.0]) for dx in fore_aft])
+    try:
+        kept = np.array_equal(holdable_postures(kin, placement.left, placement.right, placement.nominal[None])[0],
+                              placement.nominal)
+    except IKError:
+        kept = False
+    if kept:
+        return placement
+    postures, _, right = reachable_postures(kin, placement.left, placement.right, placement.nominal[None], slide=True)
+    return replace(placement, right=pin.SE3(right[0][:3, :3], right[0][:3, 3]), nominal=postures[0])
+
+
+# A commanded step along one posture axis (leg lengths, rad) for `followable_axes`.
+FOLLOW_PROBE = 0.02
+
+
+def followable_axes(kin: LegKinematics, placement: "Placement") -> np.ndarray:
+    """(6,) bool: the posture axes [x, y, z, roll, pitch, yaw] along which the pelvis can
+    move with the soles where `placement` puts them. All of them for legs of six joints.
+    For shorter legs, measured: a step of FOLLOW_PROBE (leg lengths, rad) along each axis
+    from the nominal posture, and the axes along which the reachable posture nearest it
+    moves at least half the step (on the A3-like robot without ankle roll: fore-aft,
+    height and pitch; not sideways, roll or yaw)."""
+    if kin.reaches_any_sole_pose:
+        return np.ones(6, dtype=bool)
+    step = FOLLOW_PROBE * np.r_[np.full(3, kin.dims.leg_length), np.ones(3)]
+    reached = holdable_postures(kin, placement.left, placement.right, placement.nominal + np.diag(step))
+    return np.diag(reached - placement.nominal) / step > 0.5
 
 
 # Placement jitter in metres (`CollectConfig.jitter_m`, `heldout_jitter_m`) is written for
@@ -194,27 +260,36 @@ def place(stance: Stance, dims: RobotDims, rng: np.random.Generator | None = Non
           jitter_m: float = 0.0, jitter_rad: float = 0.0) -> Placement:
     """Sole poses for `stance`, each perturbed uniformly by up to the jitter (`jitter_m`
     for an A3-sized leg, `jitter_scale`)."""
-    L = dims.leg_length
     jitter_m = jitter_m * jitter_scale(dims)
+    d = [np.zeros(3) if rng is None else rng.uniform(-1, 1, 3) * [jitter_m, jitter_m, jitter_rad] for _ in SIDES]
+    return _placement(stance, dims, d)
+
+
+def _placement(stance: Stance, dims: RobotDims, jitter: list[np.ndarray]) -> Placement:
+    """`place` with each sole moved by its jitter (dx, dy, dyaw)."""
+    L = dims.leg_length
     y = dims.foot_y + stance.extra_width * L
-    feet = []
-    for sx, sy, yaw in ((stance.left_x, y, stance.toe_out), (stance.right_x, -y, -stance.toe_out)):
-        d = np.zeros(3) if rng is None else rng.uniform(-1, 1, 3) * [jitter_m, jitter_m, jitter_rad]
-        feet.append(pose_xyz_rpy([sx * L + d[0], sy + d[1], 0.0], [0.0, 0.0, yaw + d[2]]))
+    feet = [pose_xyz_rpy([sx * L + d[0], sy + d[1], 0.0], [0.0, 0.0, yaw + d[2]])
+            for (sx, sy, yaw), d in zip(((stance.left_x, y, stance.toe_out), (stance.right_x, -y, -stance.toe_out)),
+                                        jitter)]
     mid = (feet[0].translation + feet[1].translation) / 2
     nominal = np.array([mid[0] - dims.foot_x, mid[1], L * (1 - stance.depth), 0, 0, 0])
     return Placement(stance, feet[0], feet[1], nominal)
 
 
 def posture_trajectory(placement: Placement, dims: RobotDims, duration: float, rate_hz: float,
-                       rng: np.random.Generator, ramp_s: float = 3.0, period_scale: float = 1.0) -> np.ndarray:
+                       rng: np.random.Generator, ramp_s: float = 3.0, period_scale: float = 1.0,
+                       axes: np.ndarray | None = None) -> np.ndarray:
     """(N, 6) postures at `rate_hz`: the nominal posture plus slow sinusoids with random
     phases (periods `PERIODS` x `period_scale`: twice as slow, a quarter of the
-    accelerations), faded in (smoothstep) over `ramp_s` so motion starts from rest."""
+    accelerations), faded in (smoothstep) over `ramp_s` so motion starts from rest;
+    along the posture `axes` given only (`followable_axes`; default all)."""
     n = int(round(duration * rate_hz))
     t = np.arange(n) / rate_hz
     amp = np.array(placement.stance.amplitude) * [dims.leg_length, dims.leg_length, dims.leg_length, 1, 1, 1]
     phase = rng.uniform(0, 2 * np.pi, 6)
+    if axes is not None:
+        amp = np.where(axes, amp, 0.0)
     wave = amp * np.sin(2 * np.pi * t[:, None] / (period_scale * np.array(PERIODS)) + phase)
     return placement.nominal + fade_in(t, ramp_s)[:, None] * wave
 
@@ -276,15 +351,18 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
     """`posture_trajectory` with its motion shrunk (x `shrink` per try) until every frame
     is reachable within the joint limits of `kin` and statically balanced (the CoM at
     least a quarter sole width inside the support polygon, checked every fifth frame),
-    so any robot gets a stance it can hold on a real floor. Returns the postures (N, 6),
+    so any robot gets a stance it can hold on a real floor. Returns the postures (N, 6)
+    (those the robot holds: `posture_ik`, for legs of fewer than six joints the nearest
+    reachable ones),
     with `return_q` a `Motion`: also their joint angles (N, n) on `kin` (the whole
     trajectory's IK is solved in one batch, `posture_ik`) and the amplitude scale used."""
     margin = 0.25 * kin.dims.sole_width
-    base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng, period_scale=period_scale)
+    base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng, period_scale=period_scale,
+                              axes=None if kin.reaches_any_sole_pose else followable_axes(kin, placement))
     for k in range(tries):
         traj = placement.nominal + (shrink ** k) * (base - placement.nominal)
         try:
-            q = posture_ik(kin, placement.left, placement.right, traj)
+            q, traj = posture_ik(kin, placement.left, placement.right, traj, with_postures=True)
         except IKError:
             continue
         if (support_margin(kin, placement, traj[::5], q[::5]) < margin).any():

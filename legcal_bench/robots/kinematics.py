@@ -9,7 +9,7 @@ legs of six joints, 10 for legs of five (no ankle roll).
 A leg of six joints reaches any nearby sole pose, so in double support any pelvis pose
 near the stance is a posture. A leg of five reaches only a five-dimensional family of
 sole poses: each leg then constrains the pelvis by one equation, and of a commanded
-pelvis pose only its nearest reachable pose can be held (`reachable_postures`).
+pelvis pose only a nearby reachable pose can be held (`reachable_postures`).
 
 Two paths compute the same kinematics:
 
@@ -36,7 +36,7 @@ import pinocchio as pin
 from scipy.optimize import least_squares
 
 from legcal_bench.errors import IKError, LegMapError
-from legcal_bench.geometry.lie import Jr_inv, Log, adjoint, inverse
+from legcal_bench.geometry.lie import Exp, Jr_inv, Log, adjoint, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose, posture_poses
 from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS, ROLE_AXIS_NAME
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
@@ -572,6 +572,13 @@ class LegKinematics:
             q[i] = np.clip(q[i] + bend, self.q_lower[i], self.q_upper[i])
         return q
 
+    @property
+    def reaches_any_sole_pose(self) -> bool:
+        """A leg of six joints reaches any sole pose near its own, so in double support any
+        pelvis pose near a stance is a posture; shorter legs hold only some
+        (`holdable_postures`)."""
+        return self.leg_joints == 6
+
     @cached_property
     def dims(self) -> RobotDims:
         left, right = self.sole_poses(np.zeros(self.n_joints))
@@ -717,13 +724,15 @@ def _pose_metric(kin: LegKinematics) -> np.ndarray:
 # (per rad or m of inter-foot error), and the least-squares iterations at most.
 CLOSURE_WEIGHT = 1e3
 REACH_MAX_STEPS = 100
+REACH_BLOCK = 10  # frames of a trajectory solved together, from the previous block's last solution
 
 
 def reachable_postures(kin: LegKinematics, T_W_left: pin.SE3 | np.ndarray, T_W_right: pin.SE3 | np.ndarray,
-                       postures: np.ndarray, q_init: np.ndarray | None = None,
-                       tol: float = 1e-12) -> tuple[np.ndarray, np.ndarray]:
+                       postures: np.ndarray, q_init: np.ndarray | None = None, tol: float = 1e-12,
+                       slide: bool = False) -> tuple[np.ndarray, ...]:
     """(postures (N, 6), q (N, n)): for each commanded pelvis posture (stance frame), a
-    nearby one from which both legs reach their soles at T_W_left/T_W_right (stance
+    nearby one (not farther than the nearest by more than the solver's tolerance) from
+    which both legs reach their soles at T_W_left/T_W_right (stance
     frame), and its joint angles. Legs of six joints reach every posture near a stance:
     the postures come back as commanded. A leg of k < 6 joints reaches a k-dimensional
     family of sole poses, so the postures of both legs form a (2k - 6)-dimensional family
@@ -732,68 +741,142 @@ def reachable_postures(kin: LegKinematics, T_W_left: pin.SE3 | np.ndarray, T_W_r
     at second order (the hips' spacing shrinks with its cosine), where the closure's
     Jacobian loses a rank.
 
+    Each posture starts from its seed (`q_init` (N, n)); from one seed (`q_init` (n,)
+    or None), a trajectory's frames are solved in blocks of REACH_BLOCK, each from the
+    previous block's last angles, which keeps a motion on one branch of solutions.
+
     Solved in joint space: the pelvis follows the left leg, T_WB = T_W_left T_BL(q)^-1,
     and the right sole must close the chain, C(q) = C_target (`frame_kinematics`'s
     inter-foot transform and Jacobian G). Levenberg-Marquardt on the pelvis pose's
     departure from the commanded one (translation per leg length, rotation per rad:
     `_pose_metric`) and the closure error weighted by CLOSURE_WEIGHT (a penalty, which
     the singular roll does not break as an equality constraint's multipliers would),
-    then Gauss-Newton on the closure alone until it is below `tol`. Raises IKError naming
+    stopped once a step gains less than 1e-6 of the cost (so "nearby": within 0.1 % of
+    the nearest in tests/robots/test_five_joint.py), then Gauss-Newton on the closure
+    alone until it is below `tol`. Raises IKError naming
     the frames that do not close. Joint limits are not checked here (`solve_batch` on
-    the result does)."""
+    the result does).
+
+    With `slide`, the right sole may also slide on the floor (in its plane: x, y, yaw,
+    weighed like the pelvis), as a foot placed where its leg cannot stand flat settles
+    where it can: returns (postures, q, the right soles (N, 4, 4) in the stance frame)."""
     P = np.atleast_2d(np.asarray(postures, dtype=float))
     n = len(P)
-    T_cmd = posture_poses(P)
     S_L, S_R = (_homogeneous(X)[0] for X in (T_W_left, T_W_right))
+    if q_init is None:  # seed: each leg's least-squares IK for the first commanded pose
+        q_init = kin.q_init()[None].copy()
+        for i, S in enumerate((S_L, S_R)):
+            kin._newton_batch(i, inverse(posture_poses(P[:1])) @ S, q_init, 20)
+    seeds = np.asarray(q_init, dtype=float)
+    if n > 1 and seeds.ndim == 1 or len(seeds) == 1 and n > 1:
+        # A trajectory from one seed: each block of frames from the previous block's last
+        # solution, so the postures stay on one branch (near flat parallel soles the
+        # pelvis roll has two) at a fraction of the cost of a frame-by-frame solve.
+        out, q_prev = [], seeds.reshape(-1)
+        for k in range(0, n, REACH_BLOCK):
+            block = P[k:k + REACH_BLOCK]
+            out.append(_reach(kin, S_L, S_R, block, np.broadcast_to(q_prev, (len(block), len(q_prev))), tol, slide))
+            q_prev = out[-1][1][-1]
+        return tuple(np.concatenate(parts) for parts in zip(*out))
+    return _reach(kin, S_L, S_R, P, np.broadcast_to(seeds, (n, kin.n_joints)), tol, slide)
+
+
+def _reach(kin: LegKinematics, S_L: np.ndarray, S_R: np.ndarray, P: np.ndarray, q_init: np.ndarray, tol: float,
+           slide: bool) -> tuple[np.ndarray, ...]:
+    """`reachable_postures` of postures P (N, 6), each frame from its seed q_init (N, n)."""
+    n = len(P)
     C_target = np.linalg.solve(S_L, S_R)
     W = _pose_metric(kin)
-    if q_init is None:  # seed: the left leg's least-squares IK for the commanded pose
-        q_init = np.broadcast_to(kin.q_init(), (n, kin.n_joints)).copy()
-        kin._newton_batch(0, inverse(T_cmd) @ S_L, q_init, 20)
-    q = np.array(np.broadcast_to(q_init, (n, kin.n_joints)), dtype=float)
+    q = np.array(q_init, dtype=float)
+    T_cmd = posture_poses(P)
     left = kin.leg_cols["left"]
+    nq, ns = kin.n_joints, (3 if slide else 0)
+    P_slide = np.zeros((6, 3))
+    P_slide[[0, 1, 5], [0, 1, 2]] = 1.0  # the right sole's in-plane twist (x, y, yaw in its frame)
+    W_slide = W[[0, 1, 5]]
 
-    def residuals(q):
-        fk = frame_kinematics(kin, q)
-        T_BL = np.zeros((len(q), 4, 4))
+    def targets(x):
+        return C_target @ Exp(x[:, nq:] @ P_slide.T) if slide else C_target
+
+    def residuals(x, rows=slice(None)):
+        fk = frame_kinematics(kin, x[:, :nq])
+        T_BL = np.zeros((len(x), 4, 4))
         T_BL[:, :3, :3], T_BL[:, :3, 3], T_BL[:, 3, 3] = fk.R_L, fk.p_L, 1.0
-        r = Log(inverse(fk.C) @ C_target)  # closure error; G dq = r closes it to first order
-        d0 = Log(inverse(T_cmd) @ S_L @ inverse(T_BL))  # the pelvis pose against the commanded one
-        jac = np.zeros((len(q), 12, kin.n_joints))
+        r = Log(inverse(fk.C) @ targets(x))  # closure error; G dq - P ds = r closes it to first order
+        d0 = Log(inverse(T_cmd[rows]) @ S_L @ inverse(T_BL))  # the pelvis pose against the commanded one
+        jac = np.zeros((len(x), 12 + ns, nq + ns))
         # dq_L moves the pelvis by xi = -Ad(T_BL) J_L dq_L, the departure by Jr^-1(d0) xi.
         jac[:, :6, left] = -(W[:, None] * Jr_inv(d0)) @ adjoint(T_BL) @ fk.J_L
-        jac[:, 6:] = -CLOSURE_WEIGHT * fk.G
-        return np.concatenate([W * d0, CLOSURE_WEIGHT * r], axis=1), jac, fk.G, r
+        jac[:, 6:12, :nq] = -CLOSURE_WEIGHT * fk.G
+        rows = [W * d0, CLOSURE_WEIGHT * r]
+        if slide:
+            jac[:, 6:12, nq:] = CLOSURE_WEIGHT * P_slide
+            jac[:, 12:, nq:] = np.diag(W_slide)
+            rows.append(W_slide * x[:, nq:])
+        return np.concatenate(rows, axis=1), jac, fk.G, r
 
-    res, jac, _, _ = residuals(q)
+    x = np.concatenate([q, np.zeros((n, ns))], axis=1)
+    res, jac, _, _ = residuals(x)
     cost = np.einsum("ni,ni->n", res, res)
-    lam = np.full(n, 1e-3)
+    lam = np.full(n, 1e-6)
+    eye = np.eye(nq + ns)
+    active = np.arange(n)  # frames still moving
     for _ in range(REACH_MAX_STEPS):
-        JtJ = np.swapaxes(jac, 1, 2) @ jac
-        g = np.einsum("nji,nj->ni", jac, res)
-        damped = JtJ + (lam[:, None, None] * np.eye(kin.n_joints)) * np.einsum("nii->ni", JtJ)[:, None, :]
-        step = -np.linalg.solve(damped + 1e-300 * np.eye(kin.n_joints), g[..., None])[..., 0]
+        jac_a, res_a = jac[active], res[active]
+        JtJ = np.swapaxes(jac_a, 1, 2) @ jac_a
+        g = np.einsum("nji,nj->ni", jac_a, res_a)
+        damped = JtJ + (lam[active, None, None] * eye) * np.einsum("nii->ni", JtJ)[:, None, :]
+        step = -np.linalg.solve(damped + 1e-300 * eye, g[..., None])[..., 0]
         step *= np.minimum(1.0, 0.5 / np.maximum(np.abs(step).max(axis=1), 1e-300))[:, None]  # <= 0.5 rad
-        res_t, jac_t, _, _ = residuals(q + step)
+        res_t, jac_t, _, _ = residuals(x[active] + step, active)
         cost_t = np.einsum("ni,ni->n", res_t, res_t)
-        better = cost_t < cost
-        q[better] += step[better]
-        res[better], jac[better], cost[better] = res_t[better], jac_t[better], cost_t[better]
-        lam = np.where(better, np.maximum(lam / 3, 1e-12), lam * 4)
-        if np.abs(step).max() < 1e-13 or (lam > 1e12).all():
+        better = cost_t < cost[active]
+        small = np.abs(step).max(axis=1) < 1e-8  # rad
+        done = small | (better & (cost[active] - cost_t <= 1e-6 * cost[active]))  # near enough: the closure is polished next
+        idx = active[better]
+        x[idx] += step[better]
+        res[idx], jac[idx], cost[idx] = res_t[better], jac_t[better], cost_t[better]
+        lam[active] = np.where(better, np.maximum(lam[active] / 3, 1e-12), lam[active] * 4)
+        active = active[~done & (lam[active] < 1e12)]
+        if active.size == 0:
             break
     closure = np.full(n, np.inf)
-    for _ in range(60):  # the closure alone; the singular roll converges by halving
-        _, _, G, r = residuals(q)
+    for _polish in range(60):  # the closure alone (the joints); the singular roll converges by halving
+        _, _, G, r = residuals(x)
         closure = np.linalg.norm(r, axis=1)
         if closure.max() < tol:
             break
-        q += _lstsq_batch(G, r)
+        x[:, :nq] += _lstsq_batch(G, r)
     failed = np.flatnonzero(closure >= max(tol, 1e-9))
     if failed.size:
         raise _ik_error(f"no reachable posture near {failed.size} of {n} commanded ones (largest closure error "
                         f"{closure[failed].max():.2e})", failed)
-    return _postures_of(S_L @ inverse(_left_poses(kin, q))), q
+    q = x[:, :nq]
+    postures = _postures_of(S_L @ inverse(_left_poses(kin, q)))
+    return (postures, q, S_L @ targets(x)) if slide else (postures, q)
+
+
+def holdable_postures(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndarray,
+                      q_init: np.ndarray | None = None) -> np.ndarray:
+    """(N, 6) the postures the robot can hold with its soles at T_W_left/T_W_right: the
+    commanded ones for legs of six joints (returned as given); for shorter legs the
+    commanded ones both legs reach, the others replaced by nearby reachable ones
+    (`reachable_postures`; IKError naming the frames that have none)."""
+    postures = np.asarray(postures, dtype=float)
+    if kin.reaches_any_sole_pose:
+        return postures
+    P = postures.reshape(-1, 6)
+    # The postures each leg reaches as commanded are kept (one batched Newton per leg);
+    # only the others are moved.
+    T_BW = inverse(posture_poses(P))
+    q = np.array(np.broadcast_to(kin.q_init() if q_init is None else q_init, (len(P), kin.n_joints)), dtype=float)
+    err = np.maximum(*(kin._newton_batch(i, T_BW @ _homogeneous(S)[0], q, 50)
+                       for i, S in enumerate((T_W_left, T_W_right))))
+    moved = np.flatnonzero(err > 1e-10)
+    out = P.copy()
+    if moved.size:
+        out[moved] = reachable_postures(kin, T_W_left, T_W_right, P[moved], q[moved[0]])[0]
+    return out.reshape(postures.shape)
 
 
 def _left_poses(kin: LegKinematics, q: np.ndarray) -> np.ndarray:

@@ -44,7 +44,7 @@ import pinocchio as pin
 from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
-from legcal_bench.robots.kinematics import LegKinematics, reachable_postures, solve_standing
+from legcal_bench.robots.kinematics import LegKinematics, holdable_postures, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
@@ -60,12 +60,10 @@ def posture_ik(kin: LegKinematics, left: pin.SE3, right: pin.SE3, postures: np.n
     frame starts from `q_init` (default `kin.q_init()`), the others from its solution, as
     a sequence of `kin.solve` calls starts each from a nearby one. Legs of fewer than six
     joints cannot hold every pelvis pose with both soles flat: each posture is replaced
-    by the nearest one they reach (`reachable_postures`) before the batch. With
+    by a nearby one they reach (`holdable_postures`) before the batch. With
     `with_postures`, returns (q, the postures solved for). Raises IKError with the
     failing frames in `.frames`."""
-    postures = np.asarray(postures, dtype=float).reshape(-1, 6)
-    if kin.leg_joints < 6:
-        postures = reachable_postures(kin, left, right, postures, q_init)[0]
+    postures = holdable_postures(kin, left, right, np.asarray(postures, dtype=float).reshape(-1, 6), q_init)
     T_BW = inverse(posture_poses(postures))
     T_left, T_right = T_BW @ left.homogeneous, T_BW @ right.homogeneous
     q0 = kin.solve_batch(T_left[:1], T_right[:1], q_init)[0]
@@ -169,9 +167,8 @@ class DoubleSupportSim:
             posture, q_true = solve_standing(self.true_kin, self.true_left, self.true_right, posture, (knee, knee))
             self._posture, self._q_stand = posture, q_true
         else:
-            self._posture = np.array(posture, dtype=float)
-            q_true = self._ik(self.true_kin, self._posture, self.true_kin.q_init())
-        self._q_cmd = q_true - self.offsets if standing else self._ik(self.nominal, self._posture, q_true)
+            q_true, self._posture = self._ik(self.true_kin, np.array(posture, dtype=float), self.true_kin.q_init())
+        self._q_cmd = q_true - self.offsets if standing else self._ik(self.nominal, self._posture, q_true)[0]
         self._q_true = q_true
         if self.mode == "kinematic":
             self._R_WB = posture_pose(self._posture).rotation
@@ -213,7 +210,7 @@ class DoubleSupportSim:
         todo = np.arange(len(postures))
         true = kin is self.true_kin
         start = self._q_true if true else self._q_cmd
-        left, right = (self.true_left, self.true_right) if true else (self.left, self.right)
+        left, right = self._soles(kin)
         while todo.size:
             try:
                 q[todo] = posture_ik(kin, left, right, postures[todo], start)
@@ -230,10 +227,16 @@ class DoubleSupportSim:
         sequential IK agree to ~1e-13). `q_cmd` (N, n) is the postures' nominal IK
         (`posture_ik`; rows of NaN are solved by `step`); in kinematic mode the simulated
         robot's IK is solved here in one batch (or taken from `q_cmd` when the simulated
-        robot is the nominal one)."""
+        robot is the nominal one). Legs of fewer than six joints hold the nearest
+        reachable postures (`holdable_postures`; the simulated robot's in kinematic mode,
+        the commanded ones otherwise), which are what is recorded."""
         postures = np.asarray(postures, dtype=float).reshape(-1, 6)
         n = len(postures)
         kinematic = self.mode == "kinematic"
+        if not self.standing:
+            held = self.true_kin if kinematic else self.nominal
+            postures = holdable_postures(held, *self._soles(held), postures,
+                                         self._q_true if kinematic else self._q_cmd)
         R_WB = posture_poses(postures)[:, :3, :3] if kinematic else None
         if kinematic and q_true is None and not self.standing:
             q_true = q_cmd if q_cmd is not None and self.true_kin is self.nominal else \
@@ -262,10 +265,17 @@ class DoubleSupportSim:
         return self.scene.model, self.data, self.data.xpos[self.scene.pelvis_body].copy()
 
     # ---------------------------------------------------------------- internals
-    def _ik(self, kin: LegKinematics, posture: np.ndarray, q_init: np.ndarray) -> np.ndarray:
+    def _soles(self, kin: LegKinematics) -> tuple[pin.SE3, pin.SE3]:
+        """Where `kin`'s soles are: the simulated robot's (placed) or the nominal ones."""
+        return (self.true_left, self.true_right) if kin is self.true_kin else (self.left, self.right)
+
+    def _ik(self, kin: LegKinematics, posture: np.ndarray, q_init: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(q, posture): `kin`'s joint angles holding `posture` with its soles, and the
+        posture held (`holdable_postures`: the one given, for legs of six joints)."""
+        left, right = self._soles(kin)
+        posture = holdable_postures(kin, left, right, posture, q_init)
         T_WB = posture_pose(posture)
-        left, right = (self.true_left, self.true_right) if kin is self.true_kin else (self.left, self.right)
-        return kin.solve(T_WB.actInv(left), T_WB.actInv(right), q_init)
+        return kin.solve(T_WB.actInv(left), T_WB.actInv(right), q_init), posture
 
     def _step(self, posture: np.ndarray, q_cmd, q_true, R_WB) -> bool:
         """`step` (posture already a fresh float array); `R_WB`, the posture's rotation
@@ -275,9 +285,9 @@ class DoubleSupportSim:
         if not self.standing:
             try:
                 if q_cmd is None:
-                    q_cmd = self._ik(self.nominal, posture, self._q_cmd)
+                    q_cmd, posture = self._ik(self.nominal, posture, self._q_cmd)
                 if kinematic and q_true is None:
-                    q_true = self._ik(self.true_kin, posture, self._q_true)
+                    q_true, posture = self._ik(self.true_kin, posture, self._q_true)
                 self._posture, self._q_cmd = posture, np.array(q_cmd, dtype=float)
                 if kinematic:
                     self._q_true = np.array(q_true, dtype=float)
