@@ -160,7 +160,7 @@ def cmd_design(a: argparse.Namespace) -> int:
     """Predicted information of the default stances against a greedy E-optimal choice
     of sampled stances, each screened in simulation for the hold check (weld, contact)."""
     from legcal_bench.estimation.information.design import design
-    from legcal_bench.protocol.stances import STANCES
+    from legcal_bench.protocol.stances import STANCES, stances_for
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.kinematics import LegKinematics
 
@@ -178,7 +178,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 
         screen = HoldScreen(kin.legmap, NATIVE, contact_seeds=a.contact_seeds, weld_seeds=a.weld_seeds,
                             margin=a.margin, duration_s=frames / a.count / 50)
-    d = design(kin, list(STANCES.values()), k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
+    default, left_out = stances_for(kin, STANCES, tuple(STANCES))  # the default protocol this robot stands in
+    d = design(kin, [STANCES[n] for n in default], k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
                sensors=a.sensors, ranges=a.ranges, screen=screen, progress=not a.json,
                budget_s=a.budget if a.budget > 0 else None)
     if a.json:
@@ -186,6 +187,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 
         print(json.dumps({**d, "designed_stances": [asdict(s) for s in d["designed_stances"]]}, indent=2))
         return 0
+    for note in left_out:
+        print(f"{kin.legmap.name}: default protocol: {note}")
     print(f"{kin.legmap.name}: {d['frames']} frames in all; {d['candidates_fitting']} of {a.candidates} sampled "
           f"stances fit the robot (predicted from the kinematics, {a.sensors} sensor noise)")
     if screen is not None:

@@ -22,7 +22,9 @@ from scipy.spatial import ConvexHull
 from legcal_bench.errors import IKError
 from legcal_bench.geometry.lie import Exp, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
-from legcal_bench.robots.kinematics import LegKinematics, RobotDims, holdable_postures, reachable_postures
+from legcal_bench.robots.kinematics import (
+    LegKinematics, RobotDims, holdable_postures, reachable_postures, reached_as_commanded,
+)
 from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.double_support import posture_ik
 
@@ -154,8 +156,12 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
             stance, left_x=stance.left_x * s, right_x=stance.right_x * s, extra_width=stance.extra_width * s,
             toe_out=stance.toe_out * s, depth=max(stance.depth * s, min(MIN_DEPTH, stance.depth)))
         pl = place(fitted, kin.dims)
+        # A stance fits a robot whose legs hold its nominal posture as placed (legs of
+        # fewer than six joints do not hold every one: `reached_as_commanded`).
+        if not kin.reaches_any_sole_pose and not reached_as_commanded(kin, pl.left, pl.right, pl.nominal)[0][0]:
+            continue
+        T_BW = inverse(posture_poses(pl.nominal))
         try:
-            T_BW = inverse(posture_poses(holdable_postures(kin, pl.left, pl.right, pl.nominal)))
             q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
         except IKError:
             continue
@@ -234,14 +240,13 @@ def followable_axes(kin: LegKinematics, placement: "Placement") -> np.ndarray:
     """(6,) bool: the posture axes [x, y, z, roll, pitch, yaw] along which the pelvis can
     move with the soles where `placement` puts them. All of them for legs of six joints.
     For shorter legs, measured: a step of FOLLOW_PROBE (leg lengths, rad) along each axis
-    from the nominal posture, and the axes along which the reachable posture nearest it
-    moves at least half the step (on the A3-like robot without ankle roll: fore-aft,
-    height and pitch; not sideways, roll or yaw)."""
+    from the nominal posture, and the axes along which both legs reach it as commanded
+    (`reached_as_commanded`; on the A3-like robot without ankle roll: fore-aft, height
+    and pitch; not sideways, roll or yaw, which their soles follow only in part)."""
     if kin.reaches_any_sole_pose:
         return np.ones(6, dtype=bool)
     step = FOLLOW_PROBE * np.r_[np.full(3, kin.dims.leg_length), np.ones(3)]
-    reached = holdable_postures(kin, placement.left, placement.right, placement.nominal + np.diag(step))
-    return np.diag(reached - placement.nominal) / step > 0.5
+    return reached_as_commanded(kin, placement.left, placement.right, placement.nominal + np.diag(step))[0]
 
 
 # Placement jitter in metres (`CollectConfig.jitter_m`, `heldout_jitter_m`) is written for

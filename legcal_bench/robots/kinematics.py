@@ -856,6 +856,19 @@ def _reach(kin: LegKinematics, S_L: np.ndarray, S_R: np.ndarray, P: np.ndarray, 
     return (postures, q, S_L @ targets(x)) if slide else (postures, q)
 
 
+def reached_as_commanded(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndarray,
+                         q_init: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(reached (N,) bool, q (N, n)): which postures (N, 6) both legs reach exactly as
+    commanded with their soles at T_W_left/T_W_right (each leg's least-squares Newton
+    from `q_init` closes to 1e-10), and the angles found. Joint limits not checked."""
+    P = np.asarray(postures, dtype=float).reshape(-1, 6)
+    T_BW = inverse(posture_poses(P))
+    q = np.array(np.broadcast_to(kin.q_init() if q_init is None else q_init, (len(P), kin.n_joints)), dtype=float)
+    err = np.maximum(*(kin._newton_batch(i, T_BW @ _homogeneous(S)[0], q, 50)
+                       for i, S in enumerate((T_W_left, T_W_right))))
+    return err <= 1e-10, q
+
+
 def holdable_postures(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndarray,
                       q_init: np.ndarray | None = None) -> np.ndarray:
     """(N, 6) the postures the robot can hold with its soles at T_W_left/T_W_right: the
@@ -866,13 +879,8 @@ def holdable_postures(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndar
     if kin.reaches_any_sole_pose:
         return postures
     P = postures.reshape(-1, 6)
-    # The postures each leg reaches as commanded are kept (one batched Newton per leg);
-    # only the others are moved.
-    T_BW = inverse(posture_poses(P))
-    q = np.array(np.broadcast_to(kin.q_init() if q_init is None else q_init, (len(P), kin.n_joints)), dtype=float)
-    err = np.maximum(*(kin._newton_batch(i, T_BW @ _homogeneous(S)[0], q, 50)
-                       for i, S in enumerate((T_W_left, T_W_right))))
-    moved = np.flatnonzero(err > 1e-10)
+    reached, q = reached_as_commanded(kin, T_W_left, T_W_right, P, q_init)  # kept; only the others move
+    moved = np.flatnonzero(~reached)
     out = P.copy()
     if moved.size:
         out[moved] = reachable_postures(kin, T_W_left, T_W_right, P[moved], q[moved[0]])[0]

@@ -51,3 +51,43 @@ def test_placement_jitter_is_written_for_the_a3_like_leg_and_scales_below_it(tmp
     kid = LegKinematics(load_robot(str(write_robot(VARIATIONS[2], tmp_path)))).dims
     assert jitter_scale(kid) == pytest.approx(kid.leg_length / dims["a3"].leg_length) and jitter_scale(kid) < 0.33
 
+
+
+SHORT = ["--stance-seconds", "4", "--heldout-seconds", "2", "--standing-seconds", "1", "--heldout", "1", "--quiet"]
+
+
+# Each variation through every command, by its leg map alone. The robot new in its code
+# path (legs of five joints) runs in the test command; the others are `slow` (about a
+# minute of CPU each; `make test-slow`). Contact sessions are collected without offsets:
+# at the paper's offsets the contact floor's holds are the contact issue's (#38; the
+# five-joint robot's hip-roll offsets tilt soles it has no ankle roll to level).
+@pytest.mark.parametrize("design", [pytest.param(d, marks=[] if d.name == "five_joint" else pytest.mark.slow)
+                                    for d in VARIATIONS], ids=lambda d: d.name)
+def test_each_variation_runs_every_command(design, tmp_path, capsys, in_process_cells):
+    import json
+
+    from legcal_bench.cli import main
+
+    robot = str(write_robot(design, tmp_path / "robot"))
+    for mode, extra in (("kinematic", ["--sensors", "zero"]), ("weld", []), ("contact", ["--offsets", "none"])):
+        assert main(["collect", "--robot", robot, "--mode", mode, "--out", str(tmp_path / mode), "--json",
+                     *extra, *SHORT]) == 0
+        summary = json.loads(capsys.readouterr().out)
+        assert all(g["hold"].get("held", True) for g in summary["segments"])
+        result = tmp_path / f"{mode}.json"
+        assert main(["calibrate", "--robot", robot, "--bags", str(tmp_path / mode), "--out", str(result)]) == 0
+        capsys.readouterr()
+        assert main(["score", "--bags", str(tmp_path / mode), "--result", str(result), "--json"]) == 0
+        recovery = json.loads(capsys.readouterr().out)["recovery"]["rms_error_deg"]
+        if mode == "kinematic":
+            assert recovery < 1e-9
+    assert main(["check", "--robot", robot, "--bags", str(tmp_path / "weld")]) == 0
+    assert "no data warnings" in capsys.readouterr().out
+    assert main(["bench", "--suite", "smoke", "--robot", robot, "--out", str(tmp_path / "lb"),
+                 "--data", str(tmp_path / "lbdata"), "--quiet"]) == 0
+    cells = [json.loads(p.read_text()) for p in (tmp_path / "lb" / "results").rglob("*.json")]
+    assert len(cells) >= 3 and not [c["error"] for c in cells if "error" in c]
+    capsys.readouterr()
+    assert main(["design", "--robot", robot, "--no-screen", "--candidates", "12", "--count", "2", "--frames", "400",
+                 "--out", str(tmp_path / "protocol.yaml")]) == 0
+    assert (tmp_path / "protocol.yaml").is_file()

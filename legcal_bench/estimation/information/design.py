@@ -80,8 +80,14 @@ def stance_information(kin: LegKinematics, stance: Stance, frames: int, rate_hz:
     return StanceInfo(fitted, H * EVAL_STEP, motion.scale)
 
 
-def sample_stances(n: int, rng: np.random.Generator, ranges: str = "default") -> list[Stance]:
+def sample_stances(n: int, rng: np.random.Generator, ranges: str = "default",
+                   soles_under_hips: bool = False) -> list[Stance]:
+    """`n` candidate stances drawn from `ranges`; with `soles_under_hips` (legs that do not
+    reach every sole pose: without ankle roll a sole stands flat only under its hip, at
+    the leg's own yaw) no extra width and no toe-out (the same draws)."""
     r = CANDIDATE_RANGES[ranges]
+    if soles_under_hips:
+        r = {**r, "extra_width": (0.0, 0.0), "toe_out": (0.0, 0.0)}
     base = np.array(Stance("I", "").amplitude)
     return [Stance(f"D{i}", "designed", left_x=rng.uniform(*r["x"]), right_x=rng.uniform(*r["x"]),
                    extra_width=rng.uniform(*r["extra_width"]), toe_out=rng.uniform(*r["toe_out"]),
@@ -168,7 +174,7 @@ def design(kin: LegKinematics, default: list[Stance], k: int = 4, candidates: in
     rng = np.random.default_rng(seed)
     default_info = [stance_information(kin, s, frames // len(default), seed=seed, sensors=sensors) for s in default]
     pool = []
-    for st in tqdm(sample_stances(candidates, rng, ranges), desc="stance information", disable=not progress):
+    for st in tqdm(sample_stances(candidates, rng, ranges, not kin.reaches_any_sole_pose), desc="stance information", disable=not progress):
         try:
             pool.append(stance_information(kin, st, frames // k, seed=seed, sensors=sensors))
         except IKError:
