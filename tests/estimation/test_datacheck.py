@@ -67,7 +67,7 @@ def _swap_legs(lm, recs, truth):
 
 
 def _swap_roll_yaw(lm, recs, truth):
-    p = np.arange(12)
+    p = np.arange(lm.n_joints)
     for side in ("left", "right"):
         a, b = _role(lm, side, "hip_roll"), _role(lm, side, "hip_yaw")
         p[[a, b]] = p[[b, a]]

@@ -61,27 +61,28 @@ def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig
     fr = frame_residuals(prep, offsets_fit(prep, dq, segs), segs)
     bound = prep.stances[0].sensor_model.tilt_bound
     tilt = np.arange(fr.model.n)[fr.model.slices[NOISE_TILT]][:2] if bound > 0 else np.zeros(0, dtype=int)
-    cols = np.r_[np.arange(12), tilt]
+    nj = prep.kin.legmap.n_joints  # the offsets' columns; then the IMU tilt's
+    cols = np.r_[np.arange(nj), tilt]
     prior = np.zeros((len(cols), len(cols)))
-    prior[12:, 12:] = np.eye(len(tilt)) / bound**2 if bound > 0 else 0.0
+    prior[nj:, nj:] = np.eye(len(tilt)) / bound**2 if bound > 0 else 0.0
     W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
     Jw = W @ fr.J[:, :, cols]
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
     total = sum(info.values()) + prior
     means = problem.means_at(dq)
     r, J = fr.stacked(problem.sf, problem.sg, cols)  # the noise-weighted problem's rows
-    owner = np.concatenate([[s.recording] * 11 * len(s.frames) for s in segs])
-    prior_rows = np.sqrt(prior)[12:]
+    owner = np.concatenate([[s.recording] * fr.r.shape[1] * len(s.frames) for s in segs])
+    prior_rows = np.sqrt(prior)[nj:]
     # The offsets' change without each stance: one Gauss-Newton step on the other rows
     # (the IMU tilt within its prior).
     delta = {n: -np.linalg.lstsq(np.vstack([J[owner != n], prior_rows]),
-                                 np.r_[r[owner != n], np.zeros(len(prior_rows))], rcond=None)[0][:12]
+                                 np.r_[r[owner != n], np.zeros(len(prior_rows))], rcond=None)[0][:nj]
              for n in names}
     items = []
     for i, s in enumerate(segs):
         m = fr.segment == i
-        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :12],
+        items.append({"recording": s.recording, "M": means[i], "G": fr.J_fixed[m, :6, :nj],
                       "delta": delta[s.recording],
-                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True)[:12, :12],
+                      "cov": np.linalg.pinv(total - info[s.recording], hermitian=True)[:nj, :nj],
                       "left_tilt": fr.r[m, 7:9].mean(axis=0)})
     return check_stances(items, sig["encoder"])

@@ -101,9 +101,9 @@ class StanceContact:
 
 def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA) -> list[StanceContact]:
     """The check over contact segments, each a dict with: "recording"; "M" (4, 4) its
-    mean inter-foot pose at the fit; "G" (N, 6, 12) its frames' inter-foot Jacobians
-    (mean held); "delta" (12,) the offsets' change without its recording; "cov" (12, 12)
-    the noise-only covariance of that estimate; "left_tilt" (2,) its mean left-sole tilt
+    mean inter-foot pose at the fit; "G" (N, 6, n) its frames' inter-foot Jacobians
+    w.r.t. the n leg joints (`LegMap.n_joints`; mean held); "delta" (n,) the offsets'
+    change without its recording; "cov" (n, n) the noise-only covariance of that estimate; "left_tilt" (2,) its mean left-sole tilt
     against the IMU (rad). Segments of one recording are tested together."""
     names = list(dict.fromkeys(s["recording"] for s in segments))
     left = {n: np.mean([s["left_tilt"] for s in segments if s["recording"] == n], axis=0) for n in names}

@@ -81,7 +81,7 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
     A finding hides its consequences: a stance with a frozen encoder or an unsteady
     inter-foot transform gets no further kinematic checks, one with a frozen IMU or a
     vertical inconsistent with the posture no tilt checks."""
-    dq = np.zeros(12) if dq is None else np.asarray(dq, dtype=float)
+    dq = np.zeros(kin.legmap.n_joints) if dq is None else np.asarray(dq, dtype=float)
     out: list[str] = []
     frozen: dict[str, set[str]] = {}
     for r in recordings:
@@ -177,7 +177,7 @@ def coplanarity(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckL
     sole's frame, raw or corrected by `dq`, whichever is nearer one plane."""
     Q = r.q_enc[_subsample(r, limits.max_frames)]
     best = None
-    for d in (np.zeros(12), dq):
+    for d in (np.zeros_like(dq), dq):
         C = frame_kinematics(kin, Q + d).C
         z = float(np.median(C[:, 2, 3]))
         tilt = float(np.median(np.arccos(np.clip(C[:, 2, 2], -1.0, 1.0))))
@@ -225,12 +225,13 @@ def _column_candidates(kin: LegKinematics) -> list[tuple[str, np.ndarray, np.nda
     names, roles = kin.legmap.joint_names, kin.legmap.joint_roles
     side_cols = {s: [names.index(j.name) for j in kin.legmap.legs[s].joints] for s in kin.legmap.legs}
     left, right = side_cols["left"], side_cols["right"]
-    ident, ones = np.arange(12), np.ones(12)
+    n = kin.legmap.n_joints
+    ident, ones = np.arange(n), np.ones(n)
     out = []
     perm = ident.copy()
     perm[left], perm[right] = right, left
     out.append(("the left and right legs' columns are exchanged", perm, ones))
-    for a, b in itertools.combinations(range(6), 2):
+    for a, b in itertools.combinations(range(kin.legmap.leg_joints), 2):
         both = ident.copy()
         for cols in (left, right):
             both[[cols[a], cols[b]]] = both[[cols[b], cols[a]]]
@@ -239,7 +240,7 @@ def _column_candidates(kin: LegKinematics) -> list[tuple[str, np.ndarray, np.nda
             one = ident.copy()
             one[[cols[a], cols[b]]] = one[[cols[b], cols[a]]]
             out.append((f"{names[cols[a]]} and {names[cols[b]]} are exchanged", one, ones))
-    for j in range(12):
+    for j in range(n):
         s = ones.copy()
         s[j] = -1.0
         out.append((f"{names[j]} reads with the opposite sign", ident, s))
@@ -250,7 +251,11 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
                     limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
     """The stances whose inter-foot transform is unsteady both on the raw encoders and
     corrected by `dq`, with the wiring mistake that explains it if one does (searched on
-    the raw encoders: a wrong column order spoils the estimate)."""
+    the raw encoders: a wrong column order spoils the estimate). A named wiring mistake
+    is the logger's, so it concerns every stance: all are returned, and their further
+    checks skipped (on a short-legged robot a stance with little hip motion can stay
+    under the dispersion limit with the columns exchanged, and its IMU and slide figures
+    would then be read as defects of their own)."""
     Qs = {r.name: r.q_enc[_subsample(r, limits.max_frames)] for r in stances}
     disp = {n: min(_dispersion(kin, [Q]), _dispersion(kin, [Q + dq])) for n, Q in Qs.items()}
     unsteady = sorted(n for n, d in disp.items() if d > limits.dispersion_m)
@@ -266,6 +271,7 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
     if best[1] * limits.swap_gain < raw:
         msg += (f": likely {best[0]} (the raw transform is steady to {best[1] * 1e3:.1f} mm with that undone); "
                 "check joint_names against the logger's column order")
+        return [msg], set(Qs)
     else:
         msg += ": a foot moved, or the columns, units or leg map do not match the robot"
     return [msg], set(unsteady)
@@ -289,7 +295,7 @@ def _gravity_fit(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray, dq: np.ndar
     """(badness against the limits, median angle, moving RMS) of the IMU's vertical
     against the posture's, raw or corrected by `dq`, whichever fits better."""
     return min((max(ang / limits.gravity_rad, mov / limits.gravity_motion_rad), ang, mov)
-               for ang, mov in (_gravity_errors(kin, Q + d, acc) for d in (np.zeros(12), dq)))
+               for ang, mov in (_gravity_errors(kin, Q + d, acc) for d in (np.zeros_like(dq), dq)))
 
 
 def _signed_permutations():
@@ -362,7 +368,7 @@ def end_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckL
         out["distance"] = float(np.linalg.norm(p.mean(axis=0)))
         return out
 
-    a, b = changes(np.zeros(12)), changes(dq)
+    a, b = changes(np.zeros_like(dq)), changes(dq)
     return {k: (a[k] if np.linalg.norm(a[k]) <= np.linalg.norm(b[k]) else b[k]) for k in a}
 
 
@@ -414,7 +420,7 @@ def statistics(kin: LegKinematics, r: Recording, dq: np.ndarray | None = None,
                limits: CheckLimits = LIMITS) -> dict:
     """What the checks measure on one recording, in display units (mm, deg), for
     `legcal-bench check`: each figure is the one its check compares with its limit."""
-    dq = np.zeros(12) if dq is None else np.asarray(dq, dtype=float)
+    dq = np.zeros(kin.legmap.n_joints) if dq is None else np.asarray(dq, dtype=float)
     ok = _finite(r)
     out: dict = {"name": r.name, "kind": r.kind, "frames": r.n_frames, "finite_frames": int(ok.sum()),
                  "longest_run_encoder": max(_longest_run(r.q_enc[:, j])[0] for j in range(r.q_enc.shape[1])),

@@ -26,7 +26,7 @@ def profiled_offsets(legmap: LegMap, recordings: list[Recording]) -> tuple[np.nd
     training = [r for r in recordings if r.kind in ("stance", "standing")]
     try:
         prep = prepare_sensor(legmap, training)
-        dq, _, _ = StanceProblem.of(prep).solve_trimmed(np.zeros(12), prep.options)
+        dq, _, _ = StanceProblem.of(prep).solve_trimmed(np.zeros(legmap.n_joints), prep.options)
     except CalibrationError as e:
         return None, (f"offsets not profiled out ({e}); the checks judge the raw encoders alone, which offsets of a "
                       "few degrees move by tens of millimetres: give --result for a calibration of these recordings")
