@@ -34,6 +34,14 @@ def cmd_bench_env(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_data_checks(a: argparse.Namespace) -> int:
+    from legcal_bench.reports.robots_check import run_data_checks
+
+    print(run_data_checks(a.out, a.robots, a.seeds, a.offsets, a.modes, short=a.short, defects=not a.no_defects,
+                          progress=not a.quiet))
+    return 0
+
+
 def cmd_robots_check(a: argparse.Namespace) -> int:
     from legcal_bench.reports.robots_check import run_robots_check
 
@@ -149,6 +157,22 @@ def add_commands(sub) -> None:
     rc.add_argument("--out", default="reports/robots_check")
     rc.add_argument("--quiet", action="store_true")
     rc.set_defaults(func=cmd_robots_check)
+
+    dc = sub.add_parser("data-checks", help="the data checks on clean sets of each robot variation (false alarms) "
+                                            "and the planted defects they catch; writes data_checks.md/.json")
+    dc.add_argument("--robots", nargs="+", default=None,
+                    help="variation or generated-robot names, built-ins or leg maps (default: every variation in "
+                         "legcal_bench.robots.design.VARIATIONS and the first generated robot)")
+    dc.add_argument("--seeds", nargs="+", type=int, default=list(range(5)), help="collect seeds (default 0-4)")
+    dc.add_argument("--offsets", nargs="+", default=None,
+                    help="offset specs of the clean sets (default paper random:3: robots_check.CHECK_OFFSETS)")
+    dc.add_argument("--modes", nargs="+", default=None, choices=["kinematic", "weld", "contact"],
+                    help="floors of the clean sets (default kinematic weld: robots_check.CHECK_MODES)")
+    dc.add_argument("--short", action="store_true", help="4 s stances and 1 s standing instead of 12 s and 5 s")
+    dc.add_argument("--no-defects", action="store_true", help="skip the planted defects")
+    dc.add_argument("--out", default="reports/robots_check", help="report directory (default reports/robots_check)")
+    dc.add_argument("--quiet", action="store_true", help="no progress bars")
+    dc.set_defaults(func=cmd_data_checks)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its
     # report module, which loads the simulation.

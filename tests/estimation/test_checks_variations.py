@@ -1,7 +1,7 @@
 """The data checks on the robots third parties build (issue #37 item 3;
 `legcal_bench.robots.design.VARIATIONS`): clean realistic data raises no alarm, and the
 planted defects are caught on the mirrored-pitch robot as on the A3-like one
-(`python -m legcal_bench.reports.robots_check data-checks` measures every variation over
+(`legcal-bench data-checks` measures every variation over
 seeds 0-4, paper and +-3 deg offsets, kinematic and weld)."""
 
 from __future__ import annotations

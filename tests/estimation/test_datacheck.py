@@ -208,6 +208,30 @@ def test_a_quiet_encoder_holding_one_count_while_the_robot_stands_still_is_not_f
         data_warnings(kin, recs, truth)))
 
 
+def test_a_joint_the_motion_leaves_still_is_not_frozen_but_a_channel_that_froze_is(sessions):
+    """A channel that reads one value through the whole recording is still, not frozen
+    (a five-joint leg's hip roll in sagittal stances, read without noise); and an IMU
+    declared noiseless reads one value on an axis the motion leaves still. The same
+    channel moving before it stops is frozen, and so is an IMU axis that never changes
+    where noise is declared."""
+    from dataclasses import replace
+
+    lm, clean, truth = sessions("a3")
+    kin = LegKinematics(lm)
+    k = _role(lm, "left", "hip_roll")
+    recs = copy.deepcopy(clean)
+    recs[0].q_enc[:, k] = recs[0].q_enc[0, k]  # still through the recording
+    assert not any("unchanging" in w for w in data_warnings(kin, recs, truth))
+    recs[0].q_enc[:300, k] = clean[0].q_enc[:300, k]  # moved, then stopped for good
+    assert re.search(r"stance_I: encoder left_hip_roll_joint reads one unchanging value", "\n".join(
+        data_warnings(kin, recs, truth)))
+    recs = copy.deepcopy(clean)
+    recs[0].imu_gyro[:, 0] = 0.0  # one gyro axis reads nothing at all
+    assert re.search(r"stance_I: IMU gyro x reads one unchanging value", "\n".join(data_warnings(kin, recs, truth)))
+    recs[0] = replace(recs[0], sensor_model=replace(recs[0].sensor_model, gyro_noise_std=0.0))
+    assert not any("unchanging" in w for w in data_warnings(kin, recs, truth))
+
+
 def test_check_command_prints_what_each_check_measures(sessions, tmp_path, capsys):
     from legcal_bench.cli import main
 

@@ -125,12 +125,20 @@ def frozen_channels(r: Recording, joint_names: list[str],
     """Channels stuck on one value while the robot moves (a frozen encoder, a stalled
     IMU or bus): the warnings, and which sensors ("encoder", "imu") were found stuck.
     "Moves" means another encoder spans more than `moving_rad` during the run, so a
-    quiet encoder holding one count while the robot stands still is not flagged."""
+    quiet encoder holding one count while the robot stands still is not flagged; nor is
+    an encoder whose joint never spans `moving_rad` in the recording (a joint the
+    motion leaves still, such as a five-joint leg's hip roll in sagittal stances, reads
+    one value without noise: frozen and still cannot be told apart there)."""
     groups = [(f"encoder {joint_names[j]}", r.q_enc[:, j], [k for k in range(r.q_enc.shape[1]) if k != j])
-              for j in range(r.q_enc.shape[1])]
-    for label, data in (("IMU accelerometer", r.imu_acc), ("IMU gyro", r.imu_gyro)):
+              for j in range(r.q_enc.shape[1]) if np.nanmax(r.q_enc[:, j], initial=-np.inf)
+              - np.nanmin(r.q_enc[:, j], initial=np.inf) > limits.moving_rad]
+    sm = r.sensor_model
+    for label, data, noisy in (("IMU accelerometer", r.imu_acc, sm.accel_noise_std > 0),
+                               ("IMU gyro", r.imu_gyro, sm.gyro_noise_std > 0)):
         for a in range(3):
-            groups.append((f"{label} {AXES[a]}", data[:, a], list(range(r.q_enc.shape[1]))))
+            # An IMU declared noiseless reads one value on an axis the motion leaves still.
+            if noisy or np.nanmax(data[:, a], initial=-np.inf) > np.nanmin(data[:, a], initial=np.inf):
+                groups.append((f"{label} {AXES[a]}", data[:, a], list(range(r.q_enc.shape[1]))))
     found: dict[str, list[str]] = {}
     for label, x, others in groups:
         n, start = _longest_run(x)
