@@ -62,3 +62,13 @@ def test_exchanged_columns_on_the_kid_size_robot_are_one_finding(robots, tmp_pat
     res = InterFootCalibrator().calibrate(lm, recs)
     found = data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names))
     assert len(found) == 1 and re.search(swap[2], found[0]), found
+
+
+def test_exchanged_legs_on_the_five_joint_robot_show_in_the_lunges(robots, sessions):
+    """Its sagittal stances keep the hip roll and yaw still, so with the legs' columns
+    exchanged the inter-foot transform stays steady (the column search has nothing to
+    find): the lunges then have the other foot ahead."""
+    check_defect(sessions, robots["five_joint"], "interfoot", DEFECTS[0][1],
+                 r"stance_II \(left lunge\): the right foot \d+ mm ahead of the left; stance_III \(right lunge\): "
+                 r"the right foot \d+ mm behind the left: the lunge's other foot is ahead: likely the left and right "
+                 r"legs' columns are exchanged")

@@ -13,6 +13,8 @@ possible); each names the stance, the channel, the size and the likely cause:
                    by more than 5 mm (median distance from its median) within a stance,
                    every exchange of two columns, of the legs, and every reversed joint is
                    tried, and one that makes it 5x steadier is named;
+  lunge sides      a lunge of the built-in protocol must have the foot it names ahead
+                   (exchanged legs that leave the inter-foot transform steady);
   IMU axes         the IMU's vertical disagrees with the soles' normals (the posture's up
                    with flat feet on a level floor) by more than 3 deg, or moves against
                    them by more than 1.5 deg RMS; a signed permutation of the
@@ -56,6 +58,7 @@ class CheckLimits:
     moving_rad: float = 0.002  # another encoder's span during a frozen run: the robot moved
     dispersion_m: float = 0.005
     swap_gain: float = 5.0
+    lunge_m: float = 0.1  # leg lengths: a built-in stance with its feet this far apart fore-aft is a lunge
     gravity_rad: float = np.deg2rad(3.0)
     gravity_motion_rad: float = np.deg2rad(1.5)
     coplanar_m: float = 0.02
@@ -95,6 +98,9 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
                and "encoder" not in frozen[r.name]]
     msgs, unsteady = swapped_columns(kin, [r for r in support if r.kind == "stance"], dq, limits)
     out += msgs
+    if not msgs:  # legs exchanged on a robot whose stances keep its inter-foot transform steady
+        msgs, unsteady = lunge_sides(kin, [r for r in support if r.kind == "stance"], limits)
+        out += msgs
     msgs, apart = soles_coplanar(kin, [r for r in support if r.name not in unsteady], dq, limits)
     out += msgs
     stances = [r for r in support if r.kind == "stance" and r.name not in unsteady | apart]
@@ -283,6 +289,35 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
     else:
         msg += ": a foot moved, or the columns, units or leg map do not match the robot"
     return [msg], set(unsteady)
+
+
+def lunge_sides(kin: LegKinematics, stances: list[Recording],
+                limits: CheckLimits = LIMITS) -> tuple[list[str], set[str]]:
+    """Lunges recorded with the other foot ahead: for a stance of the built-in protocol
+    whose feet are apart fore-aft by `lunge_m` leg lengths or more, the encoders must put
+    the foot the stance names ahead. Exchanged legs keep the inter-foot transform steady
+    where the stances move the legs alike (a five-joint robot's sagittal stances: its hip
+    roll and yaw stay still), so `swapped_columns` cannot see them; the lunge's side can.
+    Returns the warning and the stances it concerns (all of them: a wiring mistake)."""
+    from legcal_bench.protocol.stances import ALL_STANCES
+
+    L = kin.dims.leg_length
+    wrong = []
+    for r in stances:
+        st = ALL_STANCES.get(r.stance)
+        if st is None or abs(st.right_x - st.left_x) < limits.lunge_m:
+            continue
+        ahead = float(np.median(frame_kinematics(kin, r.q_enc[_subsample(r, limits.max_frames)]).C[:, 0, 3]))
+        expected = (st.right_x - st.left_x) * L  # the right sole's x in the left sole's frame
+        if ahead * expected < 0 and abs(ahead) > 0.5 * abs(expected):
+            wrong.append((r.name, st.label, ahead))
+    if not wrong:
+        return [], set()
+    shown = "; ".join(f"{name} ({label}): the right foot {abs(x) * 1e3:.0f} mm {'ahead of' if x > 0 else 'behind'} "
+                      "the left" for name, label, x in wrong)
+    return [f"{shown}: the lunge's other foot is ahead: likely the left and right legs' columns are exchanged "
+            "(check joint_names against the logger's column order), or the recording is not of the stance its "
+            "label names"], {r.name for r in stances}
 
 
 def _gravity_errors(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray) -> tuple[float, float]:
