@@ -1,7 +1,7 @@
 """Legs of five joints (no ankle roll, issue #37): the calibrators take the robot's joint
 count from its leg map. Exact static postures of the `five_joint` variation (the soles
-placed by stances I-III, each posture the nearest one both legs reach,
-`reachable_postures`), encoders reading the truth minus the paper's offsets: both
+placed by stances I-III, moved along the posture axes both legs follow as collect moves
+them, each posture solved by `reachable_postures`), encoders reading the truth minus the paper's offsets: both
 calibrators recover them, and the diagnostics are sized by the robot's joints."""
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from legcal_bench.calibrators.base import calibrate_training
 from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import Recording
 from legcal_bench.geometry.poses import posture_poses
-from legcal_bench.protocol.stances import ALL_STANCES, fit_stance, place
+from legcal_bench.protocol.stances import ALL_STANCES, fit_stance, followable_axes, place
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.build import write_robot
 from legcal_bench.robots.design import VARIATIONS
@@ -42,7 +42,8 @@ def _recordings(lm, kin, dq, sensors: SensorModel) -> list[Recording]:
         n = 50 if name == "standing" else 150
         t = np.arange(n) / 50.0
         sway = np.sin(2 * np.pi * np.outer(t, [0.11, 0.13, 0.17, 0.19, 0.23, 0.29]) + np.arange(6))
-        commanded = placement.nominal + (0.0 if name == "standing" else np.array(fitted.amplitude)) * sway
+        axes = followable_axes(kin, placement)  # the posture axes both legs follow, as collect moves them
+        commanded = placement.nominal + (0.0 if name == "standing" else np.array(fitted.amplitude) * axes) * sway
         postures, q = reachable_postures(kin, placement.left, placement.right, commanded)
         R_WI = posture_poses(postures)[:, :3, :3] @ kin.R_BI
         out.append(Recording(
