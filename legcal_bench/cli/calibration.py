@@ -178,8 +178,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 
         screen = HoldScreen(kin.legmap, NATIVE, contact_seeds=a.contact_seeds, weld_seeds=a.weld_seeds,
                             margin=a.margin, duration_s=frames / a.count / 50)
-    default, left_out = stances_for(kin, STANCES, tuple(STANCES))  # the default protocol this robot stands in
-    d = design(kin, [STANCES[n] for n in default], k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
+    catalog, default, left_out = stances_for(kin, STANCES, tuple(STANCES))  # the default protocol it stands in
+    d = design(kin, [catalog[n] for n in default], k=a.count, candidates=a.candidates, frames=frames, seed=a.seed,
                sensors=a.sensors, ranges=a.ranges, screen=screen, progress=not a.json,
                budget_s=a.budget if a.budget > 0 else None)
     if a.json:

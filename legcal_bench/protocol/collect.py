@@ -258,7 +258,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     catalog, stances = stance_catalog(cfg)
     left_out: list[str] = []
     if cfg.protocol is None and tuple(cfg.stances) == CollectConfig.stances:  # the default protocol
-        stances, left_out = stances_for(sim.nominal, catalog, stances)
+        catalog, stances, left_out = stances_for(sim.nominal, catalog, stances)
     unknown = sorted(floor_stances(reality.floor) - set(stances))
     if unknown:
         raise ConfigError(f"--effect shim:...,stance={unknown[0]}: stance {unknown[0]!r} is not recorded; "

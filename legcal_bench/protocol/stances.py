@@ -180,23 +180,39 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
     raise err
 
 
-def stances_for(kin: LegKinematics, catalog: dict, names: tuple[str, ...]) -> tuple[tuple[str, ...], list[str]]:
-    """(the stances of `names` the robot can stand in, a note per one left out): a stance
-    is left out only when the robot's legs lack what it needs (a wide squat needs ankle
-    roll to keep the soles flat: `absent_roles`); one that does not fit for joint limits
-    raises IKError as `fit_stance` does."""
+def stances_for(kin: LegKinematics, catalog: dict,
+                names: tuple[str, ...]) -> tuple[dict, tuple[str, ...], list[str]]:
+    """(the catalog, the stances of `names` the robot stands in, a note per change): a
+    stance the robot's legs lack what it needs for (a wide squat needs ankle roll to keep
+    the soles flat: `absent_roles`) is replaced by its variant with the soles under the
+    hips (no extra width or toe-out; named `<name>u`, added to the catalog) where that
+    fits, so the protocol keeps its number of stances, and left out otherwise; a stance
+    that does not fit for joint limits raises IKError as `fit_stance` does."""
+    catalog = dict(catalog)
     kept, notes = [], []
     for name in names:
         try:
             if name != "standing":
                 fit_stance(catalog[name], kin)
             kept.append(name)
+            continue
         except IKError as e:
             if not getattr(e, "lacking_roles", ()):
                 raise
-            notes.append(f"stance {name} ({catalog[name].label}) left out: legs without "
-                         f"{', '.join(e.lacking_roles)} cannot keep both soles flat in it")
-    return tuple(kept), notes
+            lacking = ", ".join(e.lacking_roles)
+        st = catalog[name]
+        under = replace(st, name=f"{name}u", label=f"{st.label}, soles under the hips", extra_width=0.0, toe_out=0.0)
+        try:
+            fit_stance(under, kin)
+        except IKError:
+            notes.append(f"stance {name} ({st.label}) left out: legs without {lacking} cannot keep both soles flat "
+                         "in it")
+            continue
+        catalog[under.name] = under
+        kept.append(under.name)
+        notes.append(f"stance {name} ({st.label}) recorded as {under.name} ({under.label}): legs without {lacking} "
+                     "cannot keep both soles flat at its width and toe-out")
+    return catalog, tuple(kept), notes
 
 
 @dataclass(frozen=True)
