@@ -33,6 +33,7 @@ def cmd_info(a: argparse.Namespace) -> int:
     info = {
         "name": legmap.name, "mjcf": str(legmap.mjcf), **({"urdf": str(legmap.urdf)} if legmap.urdf else {}),
         "hip_order": "->".join(r.replace("hip_", "") for r in legmap.hip_order),
+        "leg_joints": legmap.leg_joints, "absent_roles": list(legmap.absent_roles),
         "dims_m": asdict(kin.dims), "knee_straight_deg": float(np.rad2deg(legmap.knee_straight_rad)),
         "held_joints_deg": {k: float(np.rad2deg(v)) for k, v in legmap.held_joints_rad.items()},
         "joints": [],
@@ -55,6 +56,8 @@ def cmd_info(a: argparse.Namespace) -> int:
         print(json.dumps(info, indent=2))
         return 0
     print(f"{info['name']}: {info.get('urdf', info['mjcf'])}" + (f" (simulated as {info['mjcf']})" if legmap.urdf else ""))
+    print(f"  legs of {legmap.leg_joints} joints" + (f" (no {', '.join(legmap.absent_roles)}: absent_roles)"
+                                                      if legmap.absent_roles else ""))
     print(f"  hip order {info['hip_order']}; leg length {kin.dims.leg_length:.3f} m, "
           f"feet at y = ±{kin.dims.foot_y:.3f} m; sole {kin.dims.sole_length:.3f} x {kin.dims.sole_width:.3f} m")
     print(f"  {'#':>2} {'joint':<28} {'role':<12} {'axis (pelvis frame, q=0)':<26} {'to role axis':<16} "

@@ -59,6 +59,17 @@ def test_info_lists_joint_order_and_axes(capsys):
     assert [j["role"] for j in info["joints"][:3]] == ["hip_roll", "hip_yaw", "hip_pitch"]
     assert info["joints"][2]["axis_in_pelvis_at_zero"] == [0.0, 1.0, 0.0]
     assert info["axis_warnings"] == [] and {j["angle_to_role_axis_deg"] for j in info["joints"]} == {0.0}
+    assert (info["leg_joints"], info["absent_roles"]) == (6, [])
+
+
+def test_info_says_which_role_a_five_joint_leg_lacks(tmp_path, capsys):
+    from legcal_bench.robots.build import write_robot
+    from legcal_bench.robots.design import VARIATIONS
+
+    robot = write_robot(next(d for d in VARIATIONS if d.name == "five_joint"), tmp_path)
+    assert main(["info", "--robot", str(robot)]) == 0
+    out = capsys.readouterr().out
+    assert "legs of 5 joints (no ankle_roll: absent_roles)" in out and "ankle_roll_joint" not in out
 
 
 def test_info_reads_gains_unlimited_joints_and_canted_axes_as_they_are(tmp_path, capsys):
