@@ -158,13 +158,17 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
         pl = place(fitted, kin.dims)
         # A stance fits a robot whose legs hold its nominal posture as placed (legs of
         # fewer than six joints do not hold every one: `reached_as_commanded`).
-        if not kin.reaches_any_sole_pose and not reached_as_commanded(kin, pl.left, pl.right, pl.nominal)[0][0]:
-            continue
-        T_BW = inverse(posture_poses(pl.nominal))
-        try:
-            q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
-        except IKError:
-            continue
+        if kin.reaches_any_sole_pose:
+            T_BW = inverse(posture_poses(pl.nominal))
+            try:
+                q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
+            except IKError:
+                continue
+        else:
+            reached, Q = reached_as_commanded(kin, pl.left, pl.right, pl.nominal)
+            if not reached[0]:
+                continue
+            q = Q[0]
         outside = (q < lower) | (q > upper)
         if not outside.any():
             return FittedStance(fitted, float(s))

@@ -213,13 +213,14 @@ def _design_robots(names: list[str] | None, folder: Path) -> list[str]:
 
 
 def _cols(lm, side: str) -> list[int]:
-    return [lm.joint_names.index(j.name) for j in lm.legs[side].joints]
+    return list(range(lm.n_joints))[lm.leg_slice(side)]
 
 
 def _role_col(lm, side: str, role: str) -> int:
     return next(i for i in _cols(lm, side) if lm.joint_roles[i] == role)
 
 
+# The planted defects' edits of a session's recordings (also tests/estimation/test_datacheck.py's).
 def _edit_legs_swapped(lm, recs):
     for r in recs:
         r.q_enc = r.q_enc[:, _cols(lm, "right") + _cols(lm, "left")]

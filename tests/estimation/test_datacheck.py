@@ -16,6 +16,8 @@ from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
 from legcal_bench.estimation.checks.datacheck import data_warnings
 from legcal_bench.protocol.collect import CollectConfig, collect
+from legcal_bench.reports.robots_check import _cols, _edit_legs_swapped, _edit_roll_yaw_swapped
+from legcal_bench.reports.robots_check import _role_col as _role
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
@@ -42,12 +44,6 @@ def sessions(tmp_path_factory):
     return get
 
 
-def _cols(lm, side):
-    return [lm.joint_names.index(j.name) for j in lm.legs[side].joints]
-
-
-def _role(lm, side, role):
-    return [i for i in _cols(lm, side) if lm.joint_roles[i] == role][0]
 
 
 def _move_left_sole(lm, recs, truth, twist):
@@ -62,17 +58,11 @@ def _move_left_sole(lm, recs, truth, twist):
 
 
 def _swap_legs(lm, recs, truth):
-    for r in recs:
-        r.q_enc = r.q_enc[:, _cols(lm, "right") + _cols(lm, "left")]
+    _edit_legs_swapped(lm, recs)
 
 
 def _swap_roll_yaw(lm, recs, truth):
-    p = np.arange(lm.n_joints)
-    for side in ("left", "right"):
-        a, b = _role(lm, side, "hip_roll"), _role(lm, side, "hip_yaw")
-        p[[a, b]] = p[[b, a]]
-    for r in recs:
-        r.q_enc = r.q_enc[:, p]
+    _edit_roll_yaw_swapped(lm, recs)
 
 
 def _reverse_knee(lm, recs, truth):
