@@ -227,7 +227,7 @@ class DoubleSupportSim:
         sequential IK agree to ~1e-13). `q_cmd` (N, n) is the postures' nominal IK
         (`posture_ik`; rows of NaN are solved by `step`); in kinematic mode the simulated
         robot's IK is solved here in one batch (or taken from `q_cmd` when the simulated
-        robot is the nominal one). Legs of fewer than six joints hold the nearest
+        robot is the nominal one). Legs of fewer than six joints hold nearby
         reachable postures (`holdable_postures`; the simulated robot's in kinematic mode,
         the commanded ones otherwise), which are what is recorded."""
         postures = np.asarray(postures, dtype=float).reshape(-1, 6)
