@@ -373,12 +373,20 @@ def imu_axes(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
            f"and moves against it by up to {np.degrees(errs[k][2]):.2f} deg RMS (good data: under "
            f"{np.degrees(limits.gravity_rad):g} and {np.degrees(limits.gravity_motion_rad):g} deg)")
     now = max(errs[k][0] for k in bad)
-    P, b = min(((P, max(badness(k, P)[0] for k in bad)) for P in _signed_permutations()), key=lambda x: x[1])
-    if b <= 1.0 and b * 3 < now:
+    fits = [(P, b) for P, b in ((P, max(badness(k, P)[0] for k in bad)) for P in _signed_permutations())
+            if b <= 1.0 and b * 3 < now]
+    if fits:
+        # Readings the stances cannot tell apart (an axis gravity never leans along, as a
+        # pelvis that never rolls leaves y's sign unseen) all fit: the one changing the
+        # fewest axes is named, and the axes the fits disagree on are said to be unseen.
+        P, b = min(fits, key=lambda f: (int((np.diag(f[0]) != 1).sum()), f[1]))
+        unseen = [AXES[i] for i in range(3) if any(not np.array_equal(Q[i], P[i]) for Q, _ in fits)]
         reading = ", ".join(f"{AXES[i]} = {'+' if P[i].sum() > 0 else '-'}logged {AXES[int(np.argmax(abs(P[i])))]}"
                             for i in range(3))
-        msg += (f": likely permuted or flipped IMU axes (reading the accelerometer as {reading} fits); fix the "
-                "logger's axis order or the leg map's imu frame")
+        msg += (f": likely permuted or flipped IMU axes (reading the accelerometer as {reading} fits"
+                + (f"; so do readings that differ in {' and '.join(unseen)}, along which gravity never leaned in "
+                   "these stances" if unseen else "")
+                + "); fix the logger's axis order or the leg map's imu frame")
     else:
         msg += (": a wrong IMU mount rotation in the leg map (imu), a sloped floor, an IMU not rigid on the pelvis, "
                 "or a stance that is not static")
