@@ -26,8 +26,8 @@ from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, commanded_soles,
-                                          feasible_trajectory, fit_stance, load_protocol, place, posture_bounds,
-                                          settle, stances_for)
+                                          feasible_trajectory, fit_stance, load_protocol, posture_bounds,
+                                          settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -156,16 +156,18 @@ def record_segment(sim: DoubleSupportSim, stance: str, duration: float, seed: in
     fitted = fit_stance(catalog[stance], sim.nominal)
     for attempt in range(PLACEMENT_TRIES):
         # A jittered placement out of reach is drawn again (the built-ins never need to).
-        placement = settle(place(fitted.stance, sim.true_kin.dims, rng, jitter_m, jitter_rad), sim.true_kin)
+        placement = settled_placement(fitted.stance, sim.true_kin, rng, jitter_m, jitter_rad)
         try:
             sim.reset(placement.left, placement.right, placement.nominal, standing=stance == "standing",
                       stance=stance if stance_session else None)
             break
         except IKError as e:
             if attempt == PLACEMENT_TRIES - 1:
+                fix = ("remove the shim or uneven floor (--effect) or give it as pitch, which the ankle takes"
+                       if getattr(e, "unstandable", False) else "widen the joint's range in the MJCF if the real "
+                       "robot allows it")
                 raise IKError(f"stance {stance} ({catalog[stance].label}): its nominal posture is out of this "
-                              f"robot's reach ({e}); record the other stances (--stances), or widen the joint's "
-                              "range in the MJCF if the real robot allows it") from None
+                              f"robot's reach ({e}); record the other stances (--stances), or {fix}") from None
     sim.observe(rng)  # the reset observation (not logged; its noise draws keep the env's stream)
     n = int(round(duration * sim.rate_hz))
     low, high = posture_bounds(sim.nominal.dims)

@@ -614,6 +614,12 @@ def _ik_error(message: str, frames: np.ndarray) -> IKError:
     return err
 
 
+def _unstandable(message: str, frames: np.ndarray) -> IKError:
+    err = _ik_error(message, frames)
+    err.unstandable = True  # the soles, not the joint limits: `holdable_postures`
+    return err
+
+
 def _lstsq_batch(J: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise np.linalg.lstsq(J[k], b[k], rcond=None)[0]: for square J a plain solve
     where J[k] is well conditioned; where the solve fails or amplifies b by more than
@@ -869,12 +875,22 @@ def reached_as_commanded(kin: LegKinematics, T_W_left, T_W_right, postures: np.n
     return err <= 1e-10, q
 
 
+# `holdable_postures`: a held posture farther than these from the commanded one (rad; leg
+# lengths) is refused. Near flat parallel soles a five-joint robot's held posture moves
+# with the square root of the soles' misfit (the fold of `reachable_postures`): a 0.05 deg
+# roll shim under one sole of the A3-like robot without ankle roll turns its pelvis 2.7 deg
+# in yaw, where a real robot rocks its sole onto an edge; no clean stance departs at all.
+HOLD_MAX_DEPARTURE = math.radians(1.0)
+HOLD_MAX_SHIFT = 0.01
+
+
 def holdable_postures(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndarray,
                       q_init: np.ndarray | None = None) -> np.ndarray:
     """(N, 6) the postures the robot can hold with its soles at T_W_left/T_W_right: the
     commanded ones for legs of six joints (returned as given); for shorter legs the
     commanded ones both legs reach, the others replaced by nearby reachable ones
-    (`reachable_postures`; IKError naming the frames that have none)."""
+    (`reachable_postures`; IKError naming the frames that have none within
+    HOLD_MAX_DEPARTURE and HOLD_MAX_SHIFT)."""
     postures = np.asarray(postures, dtype=float)
     if kin.reaches_any_sole_pose:
         return postures
@@ -884,6 +900,18 @@ def holdable_postures(kin: LegKinematics, T_W_left, T_W_right, postures: np.ndar
     out = P.copy()
     if moved.size:
         out[moved] = reachable_postures(kin, T_W_left, T_W_right, P[moved], q[moved[0]])[0]
+        d = out[moved] - P[moved]
+        away = np.maximum(np.abs(d[:, :3]).max(axis=1) / (HOLD_MAX_SHIFT * kin.dims.leg_length),
+                          np.abs(d[:, 3:]).max(axis=1) / HOLD_MAX_DEPARTURE)
+        if away.max() > 1.0:
+            far = moved[away > 1.0]
+            w = int(np.argmax(away))
+            raise _unstandable(
+                f"no posture within {math.degrees(HOLD_MAX_DEPARTURE):g} deg and {HOLD_MAX_SHIFT:.0%} of the "
+                f"leg's length of the commanded one keeps both soles flat where they are (the nearest found is "
+                f"{math.degrees(np.abs(d[w, 3:]).max()):.1f} deg and {np.abs(d[w, :3]).max() * 1e3:.0f} mm away): legs "
+                f"without {', '.join(kin.legmap.absent_roles)} cannot stand flat on soles placed like these (a sole "
+                "tilted by a shim or an uneven floor, or placed off its hip's line)", far)
     return out.reshape(postures.shape)
 
 
