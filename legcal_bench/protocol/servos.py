@@ -64,7 +64,7 @@ _CACHE: dict[str, ServoGains] = {}
 
 
 def _choose(legmap: LegMap) -> ServoGains:
-    from legcal_bench.protocol.stances import STANCES, fit_stance, place
+    from legcal_bench.protocol.stances import STANCES, fit_stance, settled_placement
 
     sc = build_scene(legmap, "weld")
     kp, kd, source = np.array(sc.servo_kp), np.array(sc.servo_kd), list(sc.servo_source)
@@ -78,7 +78,7 @@ def _choose(legmap: LegMap) -> ServoGains:
     if "MJCF" in source:
         probe = DoubleSupportSim(legmap, "weld", np.zeros(legmap.n_joints), sim_sensors("zero"),
                                  settle_s=PROBE_SETTLE_S, servo_gains=ServoGains(tuple(kp), tuple(kd), tuple(source)))
-        pl = place(fit_stance(STANCES["I"], probe.true_kin).stance, probe.true_kin.dims)
+        pl = settled_placement(fit_stance(STANCES["I"], probe.true_kin).stance, probe.true_kin)
         probe.reset(pl.left, pl.right, pl.nominal)
         n = int(round(PROBE_HOLD_S * probe.rate_hz))
         _, truth = probe.run(np.repeat(pl.nominal[None], n, axis=0), np.random.default_rng(0))

@@ -23,7 +23,7 @@ from legcal_bench.errors import IKError
 from legcal_bench.geometry.lie import Exp, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
 from legcal_bench.robots.kinematics import (
-    LegKinematics, RobotDims, holdable_postures, reachable_postures, reached_as_commanded,
+    LegKinematics, RobotDims, reachable_postures, reached_as_commanded,
 )
 from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.double_support import posture_ik
@@ -148,14 +148,28 @@ def fit_stance(stance: Stance, kin: LegKinematics, margin_rad: float = FIT_MARGI
     return cache[key]
 
 
+def _scaled(stance: Stance, s: float) -> Stance:
+    """`stance` with its lunge, widening, toe-out and squat depth scaled by `s`."""
+    return stance if s == 1.0 else replace(
+        stance, left_x=stance.left_x * s, right_x=stance.right_x * s, extra_width=stance.extra_width * s,
+        toe_out=stance.toe_out * s, depth=max(stance.depth * s, min(MIN_DEPTH, stance.depth)))
+
+
 def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
     lower, upper = kin.q_lower + margin, kin.q_upper - margin
     worst: list[str] = []
-    for s in FIT_SCALES:
-        fitted = stance if s == 1.0 else replace(
-            stance, left_x=stance.left_x * s, right_x=stance.right_x * s, extra_width=stance.extra_width * s,
-            toe_out=stance.toe_out * s, depth=max(stance.depth * s, min(MIN_DEPTH, stance.depth)))
-        pl = place(fitted, kin.dims)
+    scales = FIT_SCALES
+    if not kin.reaches_any_sole_pose:
+        # The slide a placement needs to stand flat on legs that do not reach every sole
+        # pose grows with its size: one that needs too much at the smallest size needs too
+        # much at every size (the A3-like wide squat's extra width: 28 settles saved).
+        try:
+            settle(place(_scaled(stance, FIT_SCALES[-1]), kin.dims), kin)
+        except IKError:
+            scales = ()
+    for s in scales:
+        fitted = _scaled(stance, s)
+        pl = place(fitted, kin.dims)  # settled below for legs that need it
         # A stance fits a robot whose legs hold its nominal posture as placed (legs of
         # fewer than six joints do not hold every one: `reached_as_commanded`).
         if kin.reaches_any_sole_pose:
@@ -164,7 +178,11 @@ def _fit(stance: Stance, kin: LegKinematics, margin: float) -> FittedStance:
                 q = kin.solve_batch(T_BW @ pl.left.homogeneous, T_BW @ pl.right.homogeneous, check_limits=False)[0]
             except IKError:
                 continue
-        else:
+        else:  # where the legs stand flat near this placement (`settle`), if they do
+            try:
+                pl = settle(pl, kin)
+            except IKError:
+                continue
             reached, Q = reached_as_commanded(kin, pl.left, pl.right, pl.nominal)
             if not reached[0]:
                 continue
@@ -205,17 +223,24 @@ def stances_for(kin: LegKinematics, catalog: dict,
                 raise
             lacking = ", ".join(e.lacking_roles)
         st = catalog[name]
-        under = replace(st, name=f"{name}u", label=f"{st.label}, soles under the hips", extra_width=0.0, toe_out=0.0)
-        try:
-            fit_stance(under, kin)
-        except IKError:
+        # The toe-out is kept where the legs stand flat with it (it turns the hips' yaw and
+        # roll, which the other stances leave still), else dropped.
+        for toe_out in dict.fromkeys((st.toe_out, 0.0)):
+            under = replace(st, name=f"{name}u", label=f"{st.label}, soles under the hips" + (
+                ", toes out" if toe_out else ""), extra_width=0.0, toe_out=toe_out)
+            try:
+                fit_stance(under, kin)
+                break
+            except IKError:
+                under = None
+        if under is None:
             notes.append(f"stance {name} ({st.label}) left out: legs without {lacking} cannot keep both soles flat "
                          "in it")
             continue
         catalog[under.name] = under
         kept.append(under.name)
         notes.append(f"stance {name} ({st.label}) recorded as {under.name} ({under.label}): legs without {lacking} "
-                     "cannot keep both soles flat at its width and toe-out")
+                     "cannot keep both soles flat at its width" + ("" if under.toe_out else " and toe-out"))
     return catalog, tuple(kept), notes
 
 
@@ -241,19 +266,36 @@ def settle(placement: "Placement", kin: LegKinematics) -> "Placement":
     st, L = placement.stance, kin.dims.leg_length
     fore_aft = [placement.left.translation[0] - st.left_x * L, placement.right.translation[0] - st.right_x * L]
     placement = _placement(st, kin.dims, [np.array([dx, 0.0, 0.0]) for dx in fore_aft])
-    try:
-        kept = np.array_equal(holdable_postures(kin, placement.left, placement.right, placement.nominal[None])[0],
-                              placement.nominal)
-    except IKError:
-        kept = False
-    if kept:
+    if reached_as_commanded(kin, placement.left, placement.right, placement.nominal[None])[0][0]:
         return placement
     postures, _, right = reachable_postures(kin, placement.left, placement.right, placement.nominal[None], slide=True)
+    moved = pin.log6(placement.right.actInv(pin.SE3(right[0][:3, :3], right[0][:3, 3]))).vector
+    if np.abs(moved[:3]).max() > SETTLE_MAX_SLIDE * L or np.abs(moved[3:]).max() > SETTLE_MAX_SLIDE:
+        raise IKError(f"stance {st.name} ({st.label}): legs without {', '.join(kin.legmap.absent_roles)} stand flat "
+                      f"on this placement only with the right sole slid {np.abs(moved[:3]).max() * 1e3:.0f} mm and "
+                      f"turned {np.degrees(np.abs(moved[3:]).max()):.1f} deg (at most {SETTLE_MAX_SLIDE:.0%} of the "
+                      "leg's length and 1 deg: another stance, not this one)")
     return replace(placement, right=pin.SE3(right[0][:3, :3], right[0][:3, 3]), nominal=postures[0])
 
 
-# A commanded step along one posture axis (leg lengths, rad) for `followable_axes`.
+def settled_placement(stance: Stance, kin: LegKinematics, rng: np.random.Generator | None = None,
+                      jitter_m: float = 0.0, jitter_rad: float = 0.0) -> "Placement":
+    """`place` then `settle`: where this robot stands in `stance` (jittered with `rng`)."""
+    return settle(place(stance, kin.dims, rng, jitter_m, jitter_rad), kin)
+
+
+# `settle`: the right sole slides at most this far (leg lengths; rad) to where legs without
+# ankle roll stand flat (a toe-out of 0.15 rad with the soles under the hips of the A3-like
+# robot without ankle roll: 6.6 mm); farther is another stance.
+SETTLE_MAX_SLIDE = 0.02
+
+
+# A commanded step along one posture axis (leg lengths, rad) for `followable_axes`, and the
+# share of it the held posture may miss along that axis or move along another one (in leg
+# lengths and rad, relative to the step): a squat with toes out moves the pelvis 1 mm
+# fore-aft per 10 mm of height on the A3-like robot without ankle roll.
 FOLLOW_PROBE = 0.02
+FOLLOW_SLACK = 0.2
 
 
 def followable_axes(kin: LegKinematics, placement: "Placement") -> np.ndarray:
@@ -261,12 +303,32 @@ def followable_axes(kin: LegKinematics, placement: "Placement") -> np.ndarray:
     move with the soles where `placement` puts them. All of them for legs of six joints.
     For shorter legs, measured: a step of FOLLOW_PROBE (leg lengths, rad) along each axis
     from the nominal posture, and the axes along which both legs reach it as commanded
-    (`reached_as_commanded`; on the A3-like robot without ankle roll: fore-aft, height
-    and pitch; not sideways, roll or yaw, which their soles follow only in part)."""
+    (`reached_as_commanded`) or hold a posture that follows it within FOLLOW_SLACK
+    (`holdable_postures`). On the A3-like robot without ankle roll: fore-aft, height and
+    pitch with the soles under the hips and parallel (not sideways, roll or yaw, which
+    their soles follow only in part); height with the toes out."""
     if kin.reaches_any_sole_pose:
         return np.ones(6, dtype=bool)
     step = FOLLOW_PROBE * np.r_[np.full(3, kin.dims.leg_length), np.ones(3)]
-    return reached_as_commanded(kin, placement.left, placement.right, placement.nominal + np.diag(step))[0]
+    probes = placement.nominal + np.diag(step)
+    follows, q = reached_as_commanded(kin, placement.left, placement.right, probes)
+    rest = np.flatnonzero(~follows)  # followed with the other axes moving a little?
+    if rest.size:
+        try:
+            held = reachable_postures(kin, placement.left, placement.right, probes[rest], q[rest])[0]
+        except IKError:  # some probe has no reachable posture at all: each on its own
+            held = np.array([_held_or_nan(kin, placement, probes[a], q[a]) for a in rest])
+        moved = (held - placement.nominal) / step
+        for a, m in zip(rest, moved):
+            follows[a] = m[a] > 1 - FOLLOW_SLACK and np.abs(np.delete(m, a)).max() < FOLLOW_SLACK
+    return follows
+
+
+def _held_or_nan(kin: LegKinematics, placement: "Placement", posture: np.ndarray, q: np.ndarray) -> np.ndarray:
+    try:
+        return reachable_postures(kin, placement.left, placement.right, posture[None], q[None])[0][0]
+    except IKError:
+        return np.full(6, np.nan)
 
 
 # Placement jitter in metres (`CollectConfig.jitter_m`, `heldout_jitter_m`) is written for

@@ -34,7 +34,7 @@ from legcal_bench.estimation.imu.levelling import levelling_rotations
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.problem.residuals import flat_residuals
 from legcal_bench.geometry.poses import posture_poses
-from legcal_bench.protocol.stances import Stance, feasible_trajectory, fit_stance, place
+from legcal_bench.protocol.stances import Stance, feasible_trajectory, fit_stance, settled_placement
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, pitch_sums
 from legcal_bench.sim.sensors import sensor_model
 
@@ -65,7 +65,7 @@ def stance_information(kin: LegKinematics, stance: Stance, frames: int, rate_hz:
     if sig is None:
         raise ValueError("stance design needs a sensor model with noise (its information is relative to it)")
     fitted = fit_stance(stance, kin).stance
-    placement = place(fitted, kin.dims)
+    placement = settled_placement(fitted, kin)
     motion = feasible_trajectory(kin, placement, frames / rate_hz, rate_hz, np.random.default_rng(seed),
                                  return_q=True)
     Q = motion.q[::EVAL_STEP]
