@@ -5,9 +5,19 @@ from __future__ import annotations
 
 from dm_control import mjcf
 
+# The static contact floor (docs/contact-floor.md has the table and its reasons; fixed
+# before issue #38's work on the contact floor began). A rubber sole pad (Shore A ~60,
+# E ~3.6 MPa, 5 mm) over the whole sole sinks 16 um under half the A3-like robot's
+# weight, 21 um under the G1's; over half the sole, twice that. The floor owns the
+# contact's parameters (geom priority): MuJoCo would otherwise average its solref and
+# solimp with the robot's foot geoms' (their defaults, timeconst 0.02 s), and the soles
+# sank 262 um (A3-like, results version 8 and before); with the floor's own, 32 um
+# (`legcal-bench contact-floor` measures it per robot). Friction: dry rubber on a hard
+# floor, 1.2 sliding; torsional and rolling as the static floor has had since issue #5.
 FLOOR_FRICTION = (1.2, 0.02, 0.002)
 FLOOR_SOLREF = (0.004, 1.0)
 FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+FLOOR_PRIORITY = 1  # above every robot geom's default 0: the floor's parameters hold
 
 
 def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,
@@ -17,17 +27,21 @@ def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,
     `static_friction` (for standing still) makes friction behave as static: soft
     friction lets loaded soles creep by millimetres, so an elliptic cone with a high
     impedance ratio and a no-slip pass are used, with torsional and rolling friction
-    (condim 6). Without it (walking) the floor takes the given contact parameters and
-    sliding friction only (condim 3). Without contact, every contact is disabled
+    (condim 6), and the floor's parameters define its contacts (`FLOOR_PRIORITY`).
+    Without it (walking) the floor takes the given contact parameters, mixed with the
+    feet's as MuJoCo mixes them, and sliding friction only (condim 3). Without contact, every contact is disabled
     (nothing else in a static scene needs one)."""
     m.worldbody.add("light", pos=[0, -1, 3], dir=[0, 0.3, -1], directional=True, diffuse=[0.7, 0.7, 0.7])
     tex = m.asset.add("texture", name="legcal_grid", type="2d", builtin="checker", width=256, height=256,
                       rgb1=[0.82, 0.84, 0.86], rgb2=[0.72, 0.74, 0.78])
     mat = m.asset.add("material", name="legcal_floor", texture=tex, texrepeat=[8, 8], texuniform=True)
     collide = 1 if contact else 0
-    m.worldbody.add("geom", name="legcal_floor", type="plane", size=[5, 5, 0.1] if static_friction else [30, 30, 0.1], material=mat,
-                    contype=collide, conaffinity=collide, friction=list(friction),
-                    condim=condim or (6 if static_friction else 3), solref=list(solref), solimp=list(solimp))
+    floor = m.worldbody.add("geom", name="legcal_floor", type="plane",
+                            size=[5, 5, 0.1] if static_friction else [30, 30, 0.1], material=mat,
+                            contype=collide, conaffinity=collide, friction=list(friction),
+                            condim=condim or (6 if static_friction else 3), solref=list(solref), solimp=list(solimp))
+    if static_friction:
+        floor.priority = FLOOR_PRIORITY
     if contact and static_friction:
         m.option.cone = "elliptic"
         m.option.impratio = 10
