@@ -23,7 +23,7 @@ def cmd_collect(a: argparse.Namespace) -> int:
         offsets=a.offsets, sensors=a.sensors, seed=a.seed, heldout=a.heldout, rate_hz=a.rate,
         stance_s=a.stance_seconds, heldout_s=a.heldout_seconds, standing_s=a.standing_seconds,
         knee_straight_error_rad=float(np.deg2rad(a.knee_error_deg)), period_scale=a.period_scale,
-        protocol=a.protocol)
+        protocol=a.protocol, standing=a.standing)
     summary = collect(cfg, a.out, progress=not a.quiet)
     print(json.dumps(asdict(summary), indent=2) if a.json else format_summary(summary))
     return 0
@@ -58,6 +58,10 @@ def add_commands(sub) -> None:
     c.add_argument("--period-scale", type=float, default=1.0,
                    help="slower posture motion: its periods x this (2: a quarter of the IMU's motion acceleration; "
                         "give --stance-seconds x this to cover the same motion)")
+    c.add_argument("--standing", default="auto", choices=("auto", "cop", "none"),
+                   help="standing controller: cop moves the ankles' targets so each sole's centre of pressure stays "
+                        "centred (from the ankle force/torque sensors; docs/contact-floor.md), none holds the "
+                        "planned targets; auto (default): cop on a contact floor for a robot with ankle sensors")
     c.add_argument("--out", default="runs/collect", help="output directory (default runs/collect)")
     c.add_argument("--json", action="store_true", help="print the summary as JSON")
     c.add_argument("--quiet", action="store_true", help="no progress bar")

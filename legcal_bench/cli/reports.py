@@ -130,6 +130,17 @@ def cmd_contact_table(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_contact_floor(a: argparse.Namespace) -> int:
+    from legcal_bench.reports import contact_floor
+
+    _fill_default(a, "cases", contact_floor.CASES)
+    cases = " ".join(f"'{c}'" for c in a.cases)
+    made_by = f"legcal-bench contact-floor --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
+    _case_table(a, contact_floor, "cases", contact_floor.CASES, "contact_floor", made_by)
+    print(f"wrote {a.out}/contact_floor.md, .json")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import G1_EXAMPLE
 
@@ -182,14 +193,20 @@ def add_commands(sub) -> None:
              "effect added, beside the clean floor"),
             ("contact-table", "cases", 5, "reports/contact_check", cmd_contact_table,
              "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
-             "contact floor (flags against the truth)")):
+             "contact floor (flags against the truth)"),
+            ("contact-floor", "cases", 5, "reports/contact_floor", cmd_contact_floor,
+             "the contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
+             "sink, tilt and slip, each taken out of the encoders")):
         t = sub.add_parser(name, help=text)
-        t.add_argument("--robots", nargs="+", default=["a3", "a2", G1_EXAMPLE])
-        t.add_argument(f"--{option}", nargs="+", default=None)
-        t.add_argument("--seeds", type=int, default=seeds)
+        robots = ["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name == "contact-floor" else ["a3", "a2",
+                                                                                                     G1_EXAMPLE]
+        t.add_argument("--robots", nargs="+", default=robots,
+                       help=f"built-in names or leg-map paths (default {' '.join(robots)})")
+        t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")
+        t.add_argument("--seeds", type=int, default=seeds, help=f"seeds 0..N-1 per robot and case (default {seeds})")
         t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-        t.add_argument("--out", default=out)
-        t.add_argument("--quiet", action="store_true")
+        t.add_argument("--out", default=out, help=f"report directory (default {out})")
+        t.add_argument("--quiet", action="store_true", help="no progress bar")
         if name == "effects-table":
             t.add_argument("--stances", nargs="+", default=None,
                            help="stances to record (default I II III IV; the range stance 'tall' separates the "

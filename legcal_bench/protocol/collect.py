@@ -68,6 +68,10 @@ class CollectConfig:
     period_scale: float = 1.0
     # A protocol file (`legcal-bench design --out`): its stances replace `stances`.
     protocol: str | None = None
+    # The standing controller (`legcal_bench.sim.standing`): "cop" centres each sole's
+    # centre of pressure with the ankles, "none" holds the targets; "auto" is "cop" on a
+    # contact floor for a robot with ankle force/torque sensors, else "none".
+    standing: str = "auto"
 
 
 def stance_catalog(cfg: CollectConfig) -> tuple[dict, tuple[str, ...]]:
@@ -250,13 +254,22 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
         return _collect(cfg, out_dir, progress, legmap, reality)
 
 
+def standing_controller(cfg: CollectConfig, sim_legmap) -> str:
+    """The standing controller `cfg.standing` asks for on `sim_legmap` ("auto" resolved)."""
+    if cfg.standing != "auto":
+        return cfg.standing
+    has_ft = all(sim_legmap.legs[s].ft is not None for s in ("left", "right"))
+    return "cop" if cfg.mode == "contact" and has_ft else "none"
+
+
 def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality) -> CollectSummary:
     sim_legmap = reality.sim_legmap
     gains = servo_gains(sim_legmap) if cfg.mode != "kinematic" else None
     sim = DoubleSupportSim(
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
         reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
-        knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor)
+        knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor,
+        standing_controller=standing_controller(cfg, sim_legmap))
     catalog, stances = stance_catalog(cfg)
     left_out: list[str] = []
     if cfg.protocol is None and tuple(cfg.stances) == CollectConfig.stances:  # the default protocol

@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from legcal_bench.errors import ConfigError, IKError
-from legcal_bench.protocol.collect import CollectConfig, record_segment
+from legcal_bench.protocol.collect import CollectConfig, record_segment, standing_controller
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import ALL_STANCES, Stance
 from legcal_bench.robots.legmap import LegMap
@@ -89,7 +89,10 @@ class HoldScreen:
         self.cases = {"contact": {seed: native_draw(seed) for seed in range(contact_seeds)}, "weld": weld}
         self.limits = {"contact": HOLD_LIMITS,
                        "weld": replace(HOLD_LIMITS, pelvis_leg_fraction=HOLD_LIMITS.pelvis_leg_fraction * margin)}
-        self.sims = {(mode, case): DoubleSupportSim(legmap, mode, paper + dq, sim_sensors("zero"), servo_gains=gains)
+        # The standing controller collect would run on each floor (`standing_controller`).
+        self.sims = {(mode, case): DoubleSupportSim(legmap, mode, paper + dq, sim_sensors("zero"), servo_gains=gains,
+                                                    standing_controller=standing_controller(CollectConfig(mode=mode),
+                                                                                            legmap))
                      for mode, cases in self.cases.items() for case, dq in cases.items()}
         self.modes = tuple(m for m, c in self.cases.items() if c)
         jit = CollectConfig()

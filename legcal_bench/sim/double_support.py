@@ -49,6 +49,7 @@ from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SimSensors
+from legcal_bench.sim.standing import STANDING_CONTROLLERS, CopRegulator
 
 GRAVITY = np.array([0.0, 0.0, -9.81])
 
@@ -80,7 +81,8 @@ class DoubleSupportSim:
     def __init__(self, legmap: LegMap, mode: str, offsets: np.ndarray, sensor: SimSensors,
                  sim_legmap: LegMap | None = None, rate_hz: float = 50.0, physics_dt: float = 0.001,
                  knee_straight_error_rad: float = 0.005, settle_s: float = 3.0,
-                 servo_gains: ServoGains | None = None, floor: dict | None = None):
+                 servo_gains: ServoGains | None = None, floor: dict | None = None,
+                 standing_controller: str = "none"):
         self.legmap = legmap
         self.sim_legmap = legmap if sim_legmap is None else sim_legmap
         if self.sim_legmap.joint_names != legmap.joint_names:
@@ -129,6 +131,16 @@ class DoubleSupportSim:
                                             adr[f"{s}_torque"]:adr[f"{s}_torque"] + 3] for s in SIDES])
                             if self.has_ft else None)
             self._sole_sites = np.array([sc.sole_site[s] for s in SIDES])
+        self.regulator = None
+        if standing_controller not in STANDING_CONTROLLERS:
+            raise ConfigError(f"standing_controller {standing_controller!r}: use one of {list(STANDING_CONTROLLERS)}")
+        if standing_controller == "cop" and self.scene is not None:
+            if not self.has_ft:
+                raise ConfigError(f"standing_controller 'cop' regulates each sole's centre of pressure from its ankle "
+                                  f"force/torque sensor, and {self.sim_legmap.name} has none: give legs.left.ft and "
+                                  "legs.right.ft in the leg map, or use standing_controller 'none'")
+            self.regulator = CopRegulator(self.scene.model, self.scene, LegKinematics(self.sim_legmap),
+                                          self.physics_dt)
         self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
         self.left = self.right = None
         self.standing = False
@@ -320,6 +332,12 @@ class DoubleSupportSim:
         sc, d, mj_step = self.scene, self.data, mujoco.mj_step
         m = sc.model
         pos_act, pos_cols, motors = sc.servo
+        if self.regulator is not None:  # the standing controller's ankle corrections, step by step
+            reg = self.regulator
+            for target in targets:
+                apply_servos(sc, d, target + reg.step(d))
+                mj_step(m, d)
+            return
         if pos_cols is None and motors is None:  # every leg joint on a position actuator, in order
             ctrl = d.ctrl  # `apply_servos` of this layout, its lookups made once
             for target in targets:
@@ -342,6 +360,8 @@ class DoubleSupportSim:
         # The servos start at the true posture and blend to their (strained) targets
         # over most of the settle time (smoothstep): a step would jolt the robot off its feet.
         self._target = self._servo_target()
+        if self.regulator is not None:
+            self.regulator.reset(q_true)
         n = int(round(self.settle_s / self.physics_dt))
         s = np.minimum(1.0, np.arange(1, n + 1) / max(1, int(0.7 * n)))[:, None]
         self._drive(q_true + (s * s * (3 - 2 * s)) * (self._target - q_true))
