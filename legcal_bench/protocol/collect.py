@@ -216,7 +216,7 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
     sc = sim.scene
     left = sim.sim_legmap.leg_slice("left")
     gains = ", ".join(f"{n} {kp:.0f}" for n, kp in zip(sim.sim_legmap.joint_names[left], sc.servo_kp[left]))
-    pelvis = report.pelvis_m > report.pelvis_limit_m
+    pelvis = report.pelvis_beyond_strain_m > report.pelvis_limit_m
     lacking = sim.sim_legmap.absent_roles
     cause = ("the servos are too soft for the robot's weight (it sags or folds)" if pelvis else
              "the posture tips the robot onto a sole edge, or a sole slips" + (

@@ -121,7 +121,9 @@ class HoldScreen:
                 worst = r if worst is None else HoldReport(
                     max(worst.pelvis_m, r.pelvis_m), r.pelvis_limit_m,
                     tuple(np.maximum(worst.sole_move_m, r.sole_move_m).tolist()),
-                    tuple(np.maximum(worst.sole_tilt_rad, r.sole_tilt_rad).tolist()), limits)
+                    tuple(np.maximum(worst.sole_tilt_rad, r.sole_tilt_rad).tolist()), limits,
+                    max(worst.pelvis_strain_m, r.pelvis_strain_m),
+                    max(worst.pelvis_beyond_strain_m, r.pelvis_beyond_strain_m))
                 if not worst.held:
                     return ScreenReport(stance.name, {**reports, mode: worst})
             reports[mode] = worst

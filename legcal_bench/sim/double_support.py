@@ -44,7 +44,7 @@ import pinocchio as pin
 from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
-from legcal_bench.robots.kinematics import LegKinematics, holdable_postures, solve_standing
+from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, holdable_postures, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
@@ -476,15 +476,32 @@ class DoubleSupportSim:
             "sole_drift_rad": np.linalg.norm(Log(drift)[..., 3:], axis=-1),
             "imu_true_acc": buf["imu_true_acc"],
             "imu_true_gyro": buf["imu_true_gyro"],
-            "pelvis_hold_error_m": self._pelvis_hold_error(buf, soles, pelvis),
+            **dict(zip(("pelvis_hold_error_m", "pelvis_strain_m", "pelvis_beyond_strain_m"),
+                       self._pelvis_hold_error(buf, soles, pelvis))),
         }
 
-    def _pelvis_hold_error(self, buf, soles: np.ndarray, pelvis: np.ndarray) -> np.ndarray:
-        """(N,) distance (m) of the pelvis from its commanded pose: where the servo targets
-        put it on the simulated robot's kinematics, from each sole's actual pose (the
-        midpoint of the two legs' predictions). Zero in kinematic mode (exact postures)."""
+    def _pelvis_hold_error(self, buf, soles: np.ndarray, pelvis: np.ndarray) -> tuple[np.ndarray, ...]:
+        """((N,) x 3, m): the pelvis's distance from its commanded pose, where the servo
+        targets put it on the simulated robot's kinematics from each sole's actual pose
+        (the midpoint of the two legs' predictions); how far the offsets' strain moves
+        that pose (to the closed chain's compromise: the joint angles nearest the targets,
+        weighed by the servos' stiffness, that put both soles where they are: one
+        Gauss-Newton step of the constrained least squares); and the pelvis's distance
+        from that compromise (what sag, folding or tipping add). Zeros in kinematic mode."""
+        n = len(buf["time"])
         if "q_target" not in buf:
-            return np.zeros(len(buf["time"]))
-        T_left, T_right = self.true_kin.sole_poses_batch(buf["q_target"])
-        predicted = ((soles[:, 0] @ inverse(T_left))[:, :3, 3] + (soles[:, 1] @ inverse(T_right))[:, :3, 3]) / 2
-        return np.linalg.norm(pelvis[:, :3, 3] - predicted, axis=-1)
+            return np.zeros(n), np.zeros(n), np.zeros(n)
+        q_t = buf["q_target"]
+        T_left, T_right = self.true_kin.sole_poses_batch(q_t)
+        by_left, by_right = (soles[:, 0] @ inverse(T_left))[:, :3, 3], (soles[:, 1] @ inverse(T_right))[:, :3, 3]
+        predicted = (by_left + by_right) / 2
+        # The compromise: min (q - q_t)' K (q - q_t) with C(q) = the soles' actual transform.
+        fk = frame_kinematics(self.true_kin, q_t)
+        r = Log(inverse(fk.C) @ (inverse(soles[:, 0]) @ soles[:, 1]))
+        Kinv_Gt = np.swapaxes(fk.G, 1, 2) / self.scene.servo_kp[None, :, None]
+        dq = (Kinv_Gt @ np.linalg.solve(fk.G @ Kinv_Gt, r[..., None]))[..., 0]
+        T_left_c = self.true_kin.sole_poses_batch(q_t + dq)[0]
+        compromise = (soles[:, 0] @ inverse(T_left_c))[:, :3, 3]
+        return (np.linalg.norm(pelvis[:, :3, 3] - predicted, axis=-1),
+                np.linalg.norm(compromise - predicted, axis=-1),
+                np.linalg.norm(pelvis[:, :3, 3] - compromise, axis=-1))
