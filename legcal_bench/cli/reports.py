@@ -141,6 +141,17 @@ def cmd_contact_floor(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_contact_holds(a: argparse.Namespace) -> int:
+    from legcal_bench.reports import contact_holds
+
+    _fill_default(a, "cases", contact_holds.CASES)
+    made_by = (f"legcal-bench contact-holds --robots {' '.join(a.robots)} --cases {' '.join(a.cases)} "
+               f"--seeds {a.seeds}")
+    _case_table(a, contact_holds, "cases", contact_holds.CASES, "contact_holds", made_by)
+    print(f"wrote {a.out}/contact_holds.md, .json")
+    return 0
+
+
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import G1_EXAMPLE
 
@@ -196,10 +207,13 @@ def add_commands(sub) -> None:
              "contact floor (flags against the truth)"),
             ("contact-floor", "cases", 5, "reports/contact_floor", cmd_contact_floor,
              "the contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
-             "sink, tilt and slip, each taken out of the encoders")):
+             "sink, tilt and slip, each taken out of the encoders"),
+            ("contact-holds", "cases", 50, "reports/contact_holds", cmd_contact_holds,
+             "how many contact sets hold with factory (+-1.2 deg) plus +-3 deg offsets, with and without the "
+             "standing controller (cases: cop none)")):
         t = sub.add_parser(name, help=text)
-        robots = ["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name == "contact-floor" else ["a3", "a2",
-                                                                                                     G1_EXAMPLE]
+        robots = (["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name in ("contact-floor", "contact-holds")
+                  else ["a3", "a2", G1_EXAMPLE])
         t.add_argument("--robots", nargs="+", default=robots,
                        help=f"built-in names or leg-map paths (default {' '.join(robots)})")
         t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")

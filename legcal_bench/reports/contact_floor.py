@@ -107,12 +107,17 @@ def run_case(robot: str, case: str, seed: int) -> dict:
         recs = load_session(folder, robot=legmap)
         paths = list_segments(folder)
         truths = {Path(p).stem: load_truth(p) for p in paths}
-        calibrator = get_calibrator("interfoot")
+        # Zero noise: the default setting (the floors); realistic sensors: the sensor-matched
+        # setting, whose whitened fit the data decide on (the leaderboard's 0.003-0.004 deg
+        # relative to the IMU's vertical on weld).
+        calibrator = get_calibrator("interfoot", **({"setting": "sensor"} if sensors == "realistic" else {}))
         result = calibrate_training(calibrator, legmap, recs)
         rec = score(str(folder), result, legmap)["recovery"]
+        gls = result.diagnostics.get("generalized_least_squares")
     injected = np.asarray(next(iter(truths.values())).offsets)
     row.update(rms_deg=rec["rms_error_deg"],
-               vs_imu_deg=rec.get("vs_imu_vertical", {}).get("rms_error_deg", rec["rms_error_deg"]))
+               vs_imu_deg=rec.get("vs_imu_vertical", {}).get("rms_error_deg", rec["rms_error_deg"]),
+               gls=gls)
     dep = [sole_departure(t) for n, t in truths.items() if n.startswith("stance_")]
     rock = np.concatenate([PARTS["rocking"](d) for d in dep])
     static = np.concatenate([PARTS["static tilt"](d)[:1] for d in dep])
@@ -160,6 +165,10 @@ def summarize(rows: list[dict]) -> list[dict]:
                  "max_rms_deg": max((r["rms_deg"] for r in ok), default=None)}
             if ok:
                 s["sole"] = {k: float(np.mean([r["sole"][k] for r in ok])) for k in ok[0]["sole"]}
+            fits = [r["gls"] for r in ok if r.get("gls")]
+            if fits:
+                s["gls_used"] = sum(bool(g.get("used")) for g in fits)
+                s["gls_max_chi2"] = max(float(g["chi2_per_dof"]) for g in fits)
             if ok and "without" in ok[0]:
                 s["without"] = {k: float(np.mean([r["without"][k] for r in ok])) for k in ok[0]["without"]}
             out.append(s)
@@ -178,21 +187,25 @@ def _f(v, spec=".4f"):
 def markdown(data: dict, made_by: str, code: str) -> str:
     lines = ["# The contact floor against the weld floor", "",
              f"Made by `{made_by}` ({code}). The paper's injection, the default protocol (no held-out sessions), "
-             "the default inter-foot calibration; per case the mean over the seeds that held. Recovery: RMS error of "
+             "the inter-foot calibration at its default setting with zero noise and at the sensor-matched setting "
+             "(`setting=sensor`) with realistic sensors; per case the mean over the seeds that held. GLS: sets whose "
+             "whitened fit was kept (chi2/dof <= 1.5) and the largest chi2/dof. Recovery: RMS error of "
              "the offsets (deg); vs IMU: the same with the IMU's realized tilt taken out (`score`'s "
              "`vs_imu_vertical`; the figure to compare with realistic sensors). Ratio: contact over weld, zero noise "
              "on RMS, realistic on vs IMU. Soles (contact, truth, largest over the stances): mean sink into the "
              "floor and its span, the stance's mean tilt from flat, the tilt changing with the load (rocking), the "
              "slip in the floor's plane from the stance's mean place.", "",
-             "| robot | case | sets | recovery RMS (deg) | worst seed | vs IMU (deg) | ratio to weld | sink (um) | "
+             "| robot | case | sets | recovery RMS (deg) | worst seed | vs IMU (deg) | ratio to weld | GLS | sink (um) | "
              "sink span (um) | static tilt (deg) | rocking (deg) | slip (um) |",
-             "|---|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---|---|---:|---:|---:|---:|---|---:|---:|---:|---:|---:|"]
     for s in data["summary"]:
         sets = f"{s['sets']}" + (f" (+{s['failed']} not held)" if s["failed"] else "")
         so = s.get("sole", {})
         contact = s["case"].startswith("contact")
+        gls = (f"{s['gls_used']}/{s['sets']}, {s['gls_max_chi2']:.2f}" if s.get("gls_max_chi2") is not None
+               else "–")
         lines.append(f"| {s['robot']} | {s['case']} | {sets} | {_f(s['rms_deg'])} | {_f(s['max_rms_deg'])} | "
-                     f"{_f(s['vs_imu_deg'])} | {_f(s.get('ratio_to_weld'), '.2f')} | "
+                     f"{_f(s['vs_imu_deg'])} | {_f(s.get('ratio_to_weld'), '.2f')} | {gls} | "
                      + (f"{so['sink_um']:.0f} | {so['sink_span_um']:.1f} | {so['static_tilt_deg']:.4f} | "
                         f"{so['rocking_deg']:.4f} | {so['slip_um']:.0f} |" if contact and so else "– | – | – | – | – |"))
     shares = [s for s in data["summary"] if "without" in s]
