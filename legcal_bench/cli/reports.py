@@ -145,6 +145,7 @@ def cmd_contact_holds(a: argparse.Namespace) -> int:
     from legcal_bench.reports import contact_holds
 
     _fill_default(a, "cases", contact_holds.CASES)
+    _fill_default(a, "robots", contact_holds.default_robots())
     made_by = (f"legcal-bench contact-holds --robots {' '.join(a.robots)} --cases {' '.join(a.cases)} "
                f"--seeds {a.seeds}")
     _case_table(a, contact_holds, "cases", contact_holds.CASES, "contact_holds", made_by)
@@ -214,8 +215,13 @@ def add_commands(sub) -> None:
         t = sub.add_parser(name, help=text)
         robots = (["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name in ("contact-floor", "contact-holds")
                   else ["a3", "a2", G1_EXAMPLE])
-        t.add_argument("--robots", nargs="+", default=robots,
-                       help=f"built-in names or leg-map paths (default {' '.join(robots)})")
+        if name == "contact-holds":  # the generated robots' names are filled in by the command
+            t.add_argument("--robots", nargs="+", default=None,
+                           help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design; "
+                                f"default {' '.join(robots)} and every generated robot)")
+        else:
+            t.add_argument("--robots", nargs="+", default=robots,
+                           help=f"built-in names or leg-map paths (default {' '.join(robots)})")
         t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")
         t.add_argument("--seeds", type=int, default=seeds, help=f"seeds 0..N-1 per robot and case (default {seeds})")
         t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")

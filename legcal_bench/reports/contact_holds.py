@@ -21,6 +21,14 @@ FACTORY_DEG = 1.2
 INJECTED_DEG = 3.0
 
 
+def default_robots() -> list[str]:
+    """The built-ins, the G1 and every generated robot (`legcal_bench.robots.design`)."""
+    from legcal_bench.benchmark.suites import G1_EXAMPLE
+    from legcal_bench.robots.design import GENERATED, VARIATIONS
+
+    return ["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] + [d.name for d in (*VARIATIONS, *GENERATED)]
+
+
 def offsets_for(legmap, seed: int) -> tuple[float, ...]:
     """Factory (+-FACTORY_DEG) plus injected (+-INJECTED_DEG) offsets, uniform per joint (rad)."""
     rng = np.random.default_rng([seed, 38])
@@ -57,10 +65,17 @@ def _case(args):
 
 
 def build(robots, cases=CASES, seeds: int = 50, workers: int = 2, progress: bool = True) -> dict:
+    """`robots`: built-in names, leg-map paths, or the names of the generated robots
+    (`legcal_bench.robots.design.VARIATIONS`, `GENERATED`: written for the run)."""
     from legcal_bench.files.parallel import map_with_progress
+    from legcal_bench.reports.robots_check import _design_robots
 
-    jobs = [(r, c, s) for r in robots for c in cases for s in range(seeds)]
-    rows = map_with_progress(_case, jobs, workers, "contact-holds", progress)
+    with tempfile.TemporaryDirectory(prefix="legcal_holds_robots_") as folder:
+        paths = _design_robots(list(robots), Path(folder))
+        jobs = [(r, c, s) for r in paths for c in cases for s in range(seeds)]
+        rows = map_with_progress(_case, jobs, workers, "contact-holds", progress)
+    for r in rows:  # the name given, not the run's temporary path
+        r["robot_spec"] = robots[paths.index(r["robot_spec"])]
     return {"rows": rows, "summary": summarize(rows)}
 
 
