@@ -51,10 +51,15 @@ Never terminates; registered ids truncate after 1000 steps.
 radian per leg joint), `sensors` (`zero`, `realistic` or a sensor-model dict), `sim_robot` (simulate
 another model with the same joints), `mjcf`, `rate_hz` (logging rate, also
 `render_fps`), `physics_dt`, `offset_seed`, `knee_straight_error_rad`, `settle_s`,
-`information_reward`, `render_mode` (`rgb_array`).
+`information_reward`, `render_mode` (`rgb_array`), `standing` (the standing controller,
+as `collect --standing`: `auto`, the default, runs `cop` on a contact floor for a robot
+with ankle force/torque sensors; docs/contact-floor.md).
 
 ## Version History
 * v0: the first version (static double support with kinematic, weld and contact floors).
+  At results version 9 (issue #38) its contact floor's parameters are the floor's own and
+  a contact floor runs the standing controller unless `standing="none"`: contact-mode
+  episodes differ from earlier ones of the same id (kinematic and weld do not).
 """
 
 from __future__ import annotations
@@ -68,7 +73,8 @@ from legcal_bench.envs.base import MujocoEnv
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.estimation.information.gain import InformationGain
 from legcal_bench.protocol.servos import servo_gains
-from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, place, posture_bounds, settle
+from legcal_bench.protocol.collect import CollectConfig, standing_controller
+from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, posture_bounds, settled_placement
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -101,6 +107,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         settle_s: float = 3.0,
         information_reward: bool = True,
         render_mode: str | None = None,
+        standing: str = "auto",
     ):
         if robot is None:
             raise LegMapError("robot: give a built-in name or the path of a leg map, e.g. "
@@ -113,7 +120,8 @@ class StaticDoubleSupportEnv(MujocoEnv):
             legmap, mode, resolve_offsets(offsets, legmap, np.random.default_rng(offset_seed)), sim_sensors(sensors),
             sim_legmap=sim_legmap, rate_hz=rate_hz, physics_dt=physics_dt,
             knee_straight_error_rad=knee_straight_error_rad, settle_s=settle_s,
-            servo_gains=servo_gains(sim_legmap) if mode != "kinematic" else None)
+            servo_gains=servo_gains(sim_legmap) if mode != "kinematic" else None,
+            standing_controller=standing_controller(CollectConfig(mode=mode, standing=standing), sim_legmap))
         super().__init__(physics_dt, self.sim.n_substeps, render_mode)
         self.legmap, self.mode = legmap, mode
         low, high = posture_bounds(self.sim.nominal.dims)
@@ -136,9 +144,9 @@ class StaticDoubleSupportEnv(MujocoEnv):
         name = options.get("stance", "I")
         if name not in ALL_STANCES:
             raise ConfigError(f"reset option stance={name!r}: use one of {list(ALL_STANCES)}")
-        self.placement = settle(place(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin.dims,
-                                      self.np_random, float(options.get("jitter_m", 0.015)),
-                                      float(options.get("jitter_rad", 0.05))), self.sim.true_kin)
+        self.placement = settled_placement(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin,
+                                           self.np_random, float(options.get("jitter_m", 0.015)),
+                                           float(options.get("jitter_rad", 0.05)))
         self.sim.reset(self.placement.left, self.placement.right, self.placement.nominal, standing=name == "standing")
         obs = self.sim.observe(self.np_random)
         if self._information is not None:
