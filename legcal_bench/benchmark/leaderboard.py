@@ -297,6 +297,36 @@ def _modelgap(root: Path) -> list[str]:
             *table, ""]
 
 
+# Reports the leaderboard shows from their own results folders (`<root>/<name>/<name>.json`,
+# written by the command named): (name, report module, section title).
+REPORT_SECTIONS = (
+    ("contact_floor", "legcal_bench.reports.contact_floor", "Contact floor against weld floor"),
+    ("contact_holds", "legcal_bench.reports.contact_holds", "Holding stances on the contact floor"),
+)
+
+
+def _report_sections(root: Path) -> list[str]:
+    """Each of REPORT_SECTIONS whose results exist: its page rebuilt from its rows (so a
+    formatting change reaches it without rerunning), and its tables here."""
+    import importlib
+
+    from legcal_bench.files.reports import write_report
+
+    L = []
+    for name, module, title in REPORT_SECTIONS:
+        path = root / name / f"{name}.json"
+        if not path.is_file():
+            continue
+        mod = importlib.import_module(module)
+        d = json.loads(path.read_text())
+        d["summary"] = mod.summarize(d["rows"])
+        page = mod.markdown(d, d["made_by"], describe(d["code"]))
+        write_report(root / name, page, d, name=name)
+        L += [f"## {title}", "", f"Its own page, with every set: [{name}/{name}.md]({name}/{name}.md).",
+              *page.splitlines()[1:], ""]
+    return L
+
+
 def generate(root: str | Path = "leaderboard") -> str:
     root = Path(root)
     groups, failed = load_results(root / "results")
@@ -336,6 +366,7 @@ def generate(root: str | Path = "leaderboard") -> str:
     L += _protocol_comparison(root, groups)
     L += _closed_loop(root)
     L += _modelgap(root)
+    L += _report_sections(root)
     L += ["## Matched comparison: inter-foot vs Yamane", "",
           "Same simulated states, noise and held-out split for both methods (the paper's comparison section); "
           "each cell counts the seeds each method wins. The paper found no universal winner.", ""]

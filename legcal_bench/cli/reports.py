@@ -206,10 +206,10 @@ def add_commands(sub) -> None:
             ("contact-table", "cases", 5, "reports/contact_check", cmd_contact_table,
              "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
              "contact floor (flags against the truth)"),
-            ("contact-floor", "cases", 5, "reports/contact_floor", cmd_contact_floor,
+            ("contact-floor", "cases", 5, "leaderboard/contact_floor", cmd_contact_floor,
              "the contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
              "sink, tilt and slip, each taken out of the encoders"),
-            ("contact-holds", "cases", 50, "reports/contact_holds", cmd_contact_holds,
+            ("contact-holds", "cases", 50, "leaderboard/contact_holds", cmd_contact_holds,
              "how many contact sets hold with factory (+-1.2 deg) plus +-3 deg offsets, with and without the "
              "standing controller (cases: cop none)")):
         t = sub.add_parser(name, help=text)
