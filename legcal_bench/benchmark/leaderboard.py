@@ -297,11 +297,14 @@ def _modelgap(root: Path) -> list[str]:
             *table, ""]
 
 
-# Reports the leaderboard shows from their own results folders (`<root>/<name>/<name>.json`,
-# written by the command named): (name, report module, section title).
+# Reports the leaderboard shows from their own results folders (`<root>/<folder>/<name>.json`,
+# written by the report's command with --out <root>/<folder>): (folder, name, report
+# module, section title).
 REPORT_SECTIONS = (
-    ("contact_floor", "legcal_bench.reports.contact_floor", "Contact floor against weld floor"),
-    ("contact_holds", "legcal_bench.reports.contact_holds", "Holding stances on the contact floor"),
+    ("contact_floor", "contact_floor", "legcal_bench.reports.contact_floor", "Contact floor against weld floor"),
+    ("contact_floor_robustness", "contact_floor", "legcal_bench.reports.contact_floor",
+     "Contact floor: robustness to the floor's parameters"),
+    ("contact_holds", "contact_holds", "legcal_bench.reports.contact_holds", "Holding stances on the contact floor"),
 )
 
 
@@ -313,16 +316,16 @@ def _report_sections(root: Path) -> list[str]:
     from legcal_bench.files.reports import write_report
 
     L = []
-    for name, module, title in REPORT_SECTIONS:
-        path = root / name / f"{name}.json"
+    for folder, name, module, title in REPORT_SECTIONS:
+        path = root / folder / f"{name}.json"
         if not path.is_file():
             continue
         mod = importlib.import_module(module)
         d = json.loads(path.read_text())
         d["summary"] = mod.summarize(d["rows"])
         page = mod.markdown(d, d["made_by"], describe(d["code"]))
-        write_report(root / name, page, d, name=name)
-        L += [f"## {title}", "", f"Its own page, with every set: [{name}/{name}.md]({name}/{name}.md).",
+        write_report(root / folder, page, d, name=name)
+        L += [f"## {title}", "", f"Its own page, with every set: [{folder}/{name}.md]({folder}/{name}.md).",
               *page.splitlines()[1:], ""]
     return L
 

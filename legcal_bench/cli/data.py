@@ -23,7 +23,7 @@ def cmd_collect(a: argparse.Namespace) -> int:
         offsets=a.offsets, sensors=a.sensors, seed=a.seed, heldout=a.heldout, rate_hz=a.rate,
         stance_s=a.stance_seconds, heldout_s=a.heldout_seconds, standing_s=a.standing_seconds,
         knee_straight_error_rad=float(np.deg2rad(a.knee_error_deg)), period_scale=a.period_scale,
-        protocol=a.protocol, standing=a.standing)
+        protocol=a.protocol, standing=a.standing, contact_floor=a.floor)
     summary = collect(cfg, a.out, progress=not a.quiet)
     print(json.dumps(asdict(summary), indent=2) if a.json else format_summary(summary))
     return 0
@@ -62,6 +62,9 @@ def add_commands(sub) -> None:
                    help="standing controller: cop moves the ankles' targets so each sole's centre of pressure stays "
                         "centred (from the ankle force/torque sensors; docs/contact-floor.md), none holds the "
                         "planned targets; auto (default): cop on a contact floor for a robot with ankle sensors")
+    c.add_argument("--floor", default="", metavar="KEY=VALUE,...",
+                   help="the contact floor's parameters changed from the documented table (docs/contact-floor.md), "
+                        "for robustness studies: timeconst (s), dampratio, dmin, dmax, friction (sliding)")
     c.add_argument("--out", default="runs/collect", help="output directory (default runs/collect)")
     c.add_argument("--json", action="store_true", help="print the summary as JSON")
     c.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -136,7 +136,7 @@ def cmd_contact_floor(a: argparse.Namespace) -> int:
     _fill_default(a, "cases", contact_floor.CASES)
     cases = " ".join(f"'{c}'" for c in a.cases)
     made_by = f"legcal-bench contact-floor --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
-    _case_table(a, contact_floor, "cases", contact_floor.CASES, "contact_floor", made_by)
+    _case_table(a, contact_floor, "cases", contact_floor.KNOWN_CASES, "contact_floor", made_by)
     print(f"wrote {a.out}/contact_floor.md, .json")
     return 0
 
@@ -208,7 +208,8 @@ def add_commands(sub) -> None:
              "contact floor (flags against the truth)"),
             ("contact-floor", "cases", 5, "leaderboard/contact_floor", cmd_contact_floor,
              "the contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
-             "sink, tilt and slip, each taken out of the encoders"),
+             "sink, tilt and slip, each taken out of the encoders; robustness cases 'contact zero @<key=value>' "
+             "change one of the floor's parameters (timeconst, dampratio, dmin, dmax, friction)"),
             ("contact-holds", "cases", 50, "leaderboard/contact_holds", cmd_contact_holds,
              "how many contact sets hold with factory (+-1.2 deg) plus +-3 deg offsets, with and without the "
              "standing controller (cases: cop none)")):

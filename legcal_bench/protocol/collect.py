@@ -29,6 +29,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, comm
                                           feasible_trajectory, fit_stance, load_protocol, posture_bounds,
                                           settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION
+from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
 from legcal_bench.sim.effects import build_reality, floor_stances
@@ -72,6 +73,9 @@ class CollectConfig:
     # centre of pressure with the ankles, "none" holds the targets; "auto" is "cop" on a
     # contact floor for a robot with ankle force/torque sensors, else "none".
     standing: str = "auto"
+    # The contact floor's parameters changed from the table's (docs/contact-floor.md):
+    # "key=value,..." of `legcal_bench.sim.arena.FLOOR_KEYS`, for robustness studies.
+    contact_floor: str = ""
 
 
 def stance_catalog(cfg: CollectConfig) -> tuple[dict, tuple[str, ...]]:
@@ -269,7 +273,8 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
         reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor,
-        standing_controller=standing_controller(cfg, sim_legmap))
+        standing_controller=standing_controller(cfg, sim_legmap),
+        contact_floor=floor_parameters(cfg.contact_floor) if cfg.contact_floor else None)
     catalog, stances = stance_catalog(cfg)
     left_out: list[str] = []
     if cfg.protocol is None and tuple(cfg.stances) == CollectConfig.stances:  # the default protocol

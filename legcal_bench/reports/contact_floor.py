@@ -28,6 +28,13 @@ from pathlib import Path
 import numpy as np
 
 CASES = ("weld zero", "contact zero", "weld realistic", "contact realistic")
+# The robustness cases: the zero-noise contact floor with one of the table's parameters
+# changed (`legcal_bench.sim.arena.floor_parameters`; docs/contact-floor.md), softer and
+# stiffer, less friction (named "contact zero @<spec>").
+FLOOR_VARIANTS = ("timeconst=0.002", "timeconst=0.008", "timeconst=0.016", "dmax=0.99", "friction=0.8",
+                  "friction=1.0")
+ROBUSTNESS_CASES = tuple(f"contact zero @{v}" for v in FLOOR_VARIANTS)
+KNOWN_CASES = CASES + ROBUSTNESS_CASES
 # Parts of a sole's departure from lying flat on the floor at its stance's mean place
 # (`sole_departure`), each a function of the (N, 2, 6) departure giving the part to take out.
 def _tilt(d):
@@ -95,13 +102,14 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     from legcal_bench.robots.kinematics import LegKinematics
 
     legmap = load_robot(robot)
-    mode, sensors = case.split()
+    mode, sensors, *rest = case.split()
+    floor = rest[0][1:] if rest else ""
     row = {"robot": legmap.name, "robot_spec": robot, "case": case, "mode": mode, "sensors": sensors, "seed": seed}
     with tempfile.TemporaryDirectory(prefix="legcal_floor_") as work:
         folder = Path(work) / "set"
         try:
-            collect(CollectConfig(robot=robot, mode=mode, sensors=sensors, seed=seed, heldout=0), folder,
-                    progress=False)
+            collect(CollectConfig(robot=robot, mode=mode, sensors=sensors, seed=seed, heldout=0, contact_floor=floor),
+                    folder, progress=False)
         except HoldError as e:  # counted, not a crash
             return {**row, "failed": str(e)}
         recs = load_session(folder, robot=legmap)
@@ -126,7 +134,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
                    "static_tilt_deg": float(np.rad2deg(np.linalg.norm(static[..., 3:5], axis=-1).max())),
                    "rocking_deg": float(np.rad2deg(np.linalg.norm(rock[..., 3:5], axis=-1).max())),
                    "slip_um": float(np.abs(d[..., :2]).max() * 1e6)}
-    if mode == "contact" and sensors == "zero":
+    if mode == "contact" and sensors == "zero" and not floor:
         kin = LegKinematics(legmap)
         names = legmap.joint_names
         row["without"] = {}

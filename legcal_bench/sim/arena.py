@@ -5,6 +5,8 @@ from __future__ import annotations
 
 from dm_control import mjcf
 
+from legcal_bench.errors import ConfigError
+
 # The static contact floor (docs/contact-floor.md has the table and its reasons; fixed
 # before issue #38's work on the contact floor began). A rubber sole pad (Shore A ~60,
 # E ~3.6 MPa, 5 mm) over the whole sole sinks 16 um under half the A3-like robot's
@@ -18,6 +20,46 @@ FLOOR_FRICTION = (1.2, 0.02, 0.002)
 FLOOR_SOLREF = (0.004, 1.0)
 FLOOR_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
 FLOOR_PRIORITY = 1  # above every robot geom's default 0: the floor's parameters hold
+
+
+# `floor_parameters`: the keys a floor spec may set, and what each replaces.
+FLOOR_KEYS = {
+    "timeconst": "solref[0], s",
+    "dampratio": "solref[1]",
+    "dmin": "solimp[0]",
+    "dmax": "solimp[1]",
+    "friction": "sliding friction",
+}
+
+
+def floor_parameters(spec: str | None) -> dict:
+    """The static contact floor's parameters with `spec` ("key=value,...", keys of
+    FLOOR_KEYS; None or "": the table's) applied, as add_floor's keyword arguments.
+    ConfigError naming the key and the fix."""
+    solref, solimp, friction = list(FLOOR_SOLREF), list(FLOOR_SOLIMP), list(FLOOR_FRICTION)
+    for item in filter(None, (spec or "").split(",")):
+        key, _, value = item.partition("=")
+        key = key.strip()
+        if key not in FLOOR_KEYS:
+            raise ConfigError(f"floor {spec!r}: unknown key {key!r}; use key=value pairs of {sorted(FLOOR_KEYS)}")
+        try:
+            v = float(value)
+        except ValueError:
+            raise ConfigError(f"floor {spec!r}: {key}={value!r} is not a number") from None
+        if not v > 0 or (key in ("dmin", "dmax") and v >= 1):
+            raise ConfigError(f"floor {spec!r}: {key}={v:g} must be positive" + (" and below 1" if key in ("dmin", "dmax")
+                                                                                 else ""))
+        if key == "timeconst":
+            solref[0] = v
+        elif key == "dampratio":
+            solref[1] = v
+        elif key == "dmin":
+            solimp[0] = v
+        elif key == "dmax":
+            solimp[1] = v
+        else:
+            friction[0] = v
+    return {"solref": tuple(solref), "solimp": tuple(solimp), "friction": tuple(friction)}
 
 
 def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,

@@ -82,7 +82,7 @@ class DoubleSupportSim:
                  sim_legmap: LegMap | None = None, rate_hz: float = 50.0, physics_dt: float = 0.001,
                  knee_straight_error_rad: float = 0.005, settle_s: float = 3.0,
                  servo_gains: ServoGains | None = None, floor: dict | None = None,
-                 standing_controller: str = "none"):
+                 standing_controller: str = "none", contact_floor: dict | None = None):
         self.legmap = legmap
         self.sim_legmap = legmap if sim_legmap is None else sim_legmap
         if self.sim_legmap.joint_names != legmap.joint_names:
@@ -101,7 +101,8 @@ class DoubleSupportSim:
         self.n_substeps = max(1, int(round(self.dt / self.physics_dt)))
         self.knee_straight_error_rad = float(knee_straight_error_rad)
         self.settle_s = float(settle_s)
-        self.scene: Scene | None = build_scene(self.sim_legmap, mode, physics_dt) if mode != "kinematic" else None
+        self.scene: Scene | None = (build_scene(self.sim_legmap, mode, physics_dt, contact_floor)
+                                    if mode != "kinematic" else None)
         if self.scene is not None:
             if servo_gains is not None:
                 set_servo_gains(self.scene, np.array(servo_gains.kp), np.array(servo_gains.kd), servo_gains.source)

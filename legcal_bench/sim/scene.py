@@ -110,13 +110,14 @@ def _add_site(model: mjcf.RootElement, name: str, spec: FrameSpec, where: str, e
     return name
 
 
-def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001) -> Scene:
+def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001, floor: dict | None = None) -> Scene:
+    """`floor`: the contact floor's parameters (`arena.floor_parameters`; default the table's)."""
     if mode not in MODES:
         raise ConfigError(f"mode {mode!r}: use one of {MODES}")
     m = mjcf.from_path(str(legmap.mjcf))
     m.option.timestep = physics_dt
     m.option.integrator = "implicitfast"
-    return compose_robot(m, legmap, mode)
+    return compose_robot(m, legmap, mode, floor)
 
 
 def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | None = None) -> Scene:
@@ -137,7 +138,7 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
     if mode == "walking":
         add_floor(m, contact=True, static_friction=False, **(floor or {}))
     else:
-        add_floor(m, contact=mode == "contact")
+        add_floor(m, contact=mode == "contact", **(floor or {}))
 
     sole_site, corner_sites = {}, {}
     for side in SIDES:

@@ -21,15 +21,16 @@ def test_committed_leaderboard_regenerates_byte_identically(tmp_path):
         shutil.copy(LEADERBOARD / "modelgap" / "modelgap.json", tmp_path / "modelgap")
     from legcal_bench.benchmark.leaderboard import REPORT_SECTIONS
 
-    reports = [name for name, _, _ in REPORT_SECTIONS if (LEADERBOARD / name / f"{name}.json").is_file()]
-    for name in reports:  # the contact floor's and holds' sections read their rows
-        (tmp_path / name).mkdir()
-        shutil.copy(LEADERBOARD / name / f"{name}.json", tmp_path / name)
+    reports = [(folder, name) for folder, name, _, _ in REPORT_SECTIONS
+               if (LEADERBOARD / folder / f"{name}.json").is_file()]
+    for folder, name in reports:  # the contact floor's and holds' sections read their rows
+        (tmp_path / folder).mkdir()
+        shutil.copy(LEADERBOARD / folder / f"{name}.json", tmp_path / folder)
     text = generate(tmp_path)
     assert text == (LEADERBOARD / "README.md").read_text()
-    for folder in ["modelgap", *reports]:  # each page, rebuilt from its rows, is the committed one
+    for folder, stem in [("modelgap", "modelgap"), *reports]:  # each page, rebuilt from its rows, is the committed one
         if (tmp_path / folder).is_dir():
-            for name in (f"{folder}.md", f"{folder}.json"):
+            for name in (f"{stem}.md", f"{stem}.json"):
                 assert (tmp_path / folder / name).read_text() == (LEADERBOARD / folder / name).read_text()
     for png in (tmp_path / "plots").iterdir():
         assert png.read_bytes() == (LEADERBOARD / "plots" / png.name).read_bytes(), png.name
