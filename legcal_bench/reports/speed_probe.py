@@ -53,7 +53,8 @@ def probe(data: str, robot: str, repeats: int, collect_repeats: int, only: str |
     lm = load_robot(robot)
     # The training recordings, as the framework hands them over (`calibrate_training`; here by hand,
     # since a baseline commit may predate it).
-    recs = [r for r in load_session(data, lm.joint_names) if r.kind in ("stance", "standing")]
+    recs = ([r for r in load_session(data, lm.joint_names) if r.kind in ("stance", "standing")]
+            if only != "collection" else [])  # the collection group alone collects no data set
     out: dict = {"module": os.path.dirname(legcal_bench.__file__), "cases": {}}
     for name, (cal, options, key) in CALIBRATION_CASES.items() if only != "collection" else ():
         runs = [get_calibrator(cal, **options).calibrate(lm, recs) for _ in range(repeats)]
