@@ -313,11 +313,11 @@ def _report_sections(root: Path) -> list[str]:
     formatting change reaches it without rerunning), and its tables here."""
     import importlib
 
-    from legcal_bench.files.reports import write_report
+    from legcal_bench.files.reports import report_data, report_page, write_report
 
     L = []
     for folder, name, module, title in REPORT_SECTIONS:
-        path = root / folder / f"{name}.json"
+        path = report_data(root / folder, name)
         if not path.is_file():
             continue
         mod = importlib.import_module(module)
@@ -325,7 +325,8 @@ def _report_sections(root: Path) -> list[str]:
         d["summary"] = mod.summarize(d["rows"])
         page = mod.markdown(d, d["made_by"], describe(d["code"]))
         write_report(root / folder, page, d, name=name)
-        L += [f"## {title}", "", f"Its own page, with every set: [{folder}/{name}.md]({folder}/{name}.md).",
+        link = report_page(folder, name).as_posix()
+        L += [f"## {title}", "", f"Its own page, with every set: [{link}]({link}).",
               *page.splitlines()[1:], ""]
     return L
 

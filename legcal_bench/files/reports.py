@@ -13,9 +13,14 @@ def report_data(out: str | Path, name: str = "report") -> Path:
     return Path(out) / f"{name}.json"
 
 
+def report_page(out: str | Path, name: str = "report") -> Path:
+    """The markdown page of the report `write_report` writes into `out`."""
+    return Path(out) / f"{name}.md"
+
+
 def write_report(out: str | Path, markdown: str, data: Any, name: str = "report") -> str:
     """Write `<out>/<name>.md` and `<out>/<name>.json` atomically; returns the markdown."""
     out = Path(out)
     atomic_write_json(report_data(out, name), data)
-    atomic_write_text(out / f"{name}.md", markdown)
+    atomic_write_text(report_page(out, name), markdown)
     return markdown

@@ -96,6 +96,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
     from legcal_bench.errors import HoldError
+    from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.scoring import score
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
@@ -140,7 +141,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
         row["without"] = {}
         for label, part in PARTS.items():
             dq = calibrate_training(calibrator, legmap, without_motion(kin, recs, truths, part)).offsets_vector(names)
-            row["without"][label] = float(np.rad2deg(np.sqrt(np.mean((dq - injected) ** 2))))
+            row["without"][label] = float(np.rad2deg(rms(dq - injected)))
     return row
 
 
