@@ -44,7 +44,7 @@ from typing import Any
 #     along their roles' pelvis axes, the built-ins and the G1 among them).
 # 9 = the static contact floor's parameters are the floor's own (geom priority, issue
 #     #38): MuJoCo had averaged them with the robots' foot geoms' defaults, and the soles
-#     sank 262 um instead of 32 um (A3-like); every contact-mode set changes (kinematic and
+#     sank 265 um instead of 32 um (A3-like); every contact-mode set changes (kinematic and
 #     weld do not). Legs without ankle roll record the wide squat with the toes out
 #     (issue #37): their sets change, the built-ins' and the G1's do not.
 RESULTS_VERSION = 9

@@ -13,7 +13,7 @@ from legcal_bench.errors import ConfigError
 # weight, 21 um under the G1's; over half the sole, twice that. The floor owns the
 # contact's parameters (geom priority): MuJoCo would otherwise average its solref and
 # solimp with the robot's foot geoms' (their defaults, timeconst 0.02 s), and the soles
-# sank 262 um (A3-like, results version 8 and before); with the floor's own, 32 um
+# sank 265 um (A3-like, results version 8 and before; contact-floor with priority 0); with the floor's own, 32 um
 # (`legcal-bench contact-floor` measures it per robot). Friction: dry rubber on a hard
 # floor, 1.2 sliding; torsional and rolling as the static floor has had since issue #5.
 FLOOR_FRICTION = (1.2, 0.02, 0.002)
