@@ -89,7 +89,9 @@ class CopRegulator:
         o = data.site_xpos[self.sole_site[k]]
         f = R_f @ data.sensordata[self.force_adr[k]]
         tau = R_f @ data.sensordata[self.torque_adr[k]]
-        tau = tau + np.cross(data.site_xpos[self.ft_site[k]] - o, f)
+        r = data.site_xpos[self.ft_site[k]] - o
+        # r x f written out: np.cross costs more than the rest of the update at 500 Hz.
+        tau = tau + np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
         f_s, tau_s = R_s.T @ f, R_s.T @ tau
         if abs(f_s[2]) < MIN_LOAD_FRACTION * self.weight:
             return None
