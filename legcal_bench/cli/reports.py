@@ -119,38 +119,34 @@ def cmd_effects_table(a: argparse.Namespace) -> int:
     return 0
 
 
+def _cases_report(a: argparse.Namespace, command: str, module, known, name: str) -> int:
+    """A per-robot, per-case report command (`_case_table`) whose `--cases` default lives in
+    `module.CASES`, made_by naming the robots, cases (quoted where they have spaces) and seeds."""
+    _fill_default(a, "cases", module.CASES)
+    cases = " ".join(f"'{c}'" if " " in c else c for c in a.cases)
+    made_by = f"legcal-bench {command} --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
+    _case_table(a, module, "cases", known, name, made_by)
+    print(f"wrote {a.out}/{name}.md, .json")
+    return 0
+
+
 def cmd_contact_table(a: argparse.Namespace) -> int:
     from legcal_bench.reports import contact_table
 
-    _fill_default(a, "cases", contact_table.CASES)
-    cases = " ".join(f"'{c}'" if " " in c else c for c in a.cases)
-    made_by = f"legcal-bench contact-table --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
-    _case_table(a, contact_table, "cases", contact_table.CASES, "contact_table", made_by)
-    print(f"wrote {a.out}/contact_table.md, .json")
-    return 0
+    return _cases_report(a, "contact-table", contact_table, contact_table.CASES, "contact_table")
 
 
 def cmd_contact_floor(a: argparse.Namespace) -> int:
     from legcal_bench.reports import contact_floor
 
-    _fill_default(a, "cases", contact_floor.CASES)
-    cases = " ".join(f"'{c}'" for c in a.cases)
-    made_by = f"legcal-bench contact-floor --robots {' '.join(a.robots)} --cases {cases} --seeds {a.seeds}"
-    _case_table(a, contact_floor, "cases", contact_floor.KNOWN_CASES, "contact_floor", made_by)
-    print(f"wrote {a.out}/contact_floor.md, .json")
-    return 0
+    return _cases_report(a, "contact-floor", contact_floor, contact_floor.KNOWN_CASES, "contact_floor")
 
 
 def cmd_contact_holds(a: argparse.Namespace) -> int:
     from legcal_bench.reports import contact_holds
 
-    _fill_default(a, "cases", contact_holds.CASES)
     _fill_default(a, "robots", contact_holds.default_robots())
-    made_by = (f"legcal-bench contact-holds --robots {' '.join(a.robots)} --cases {' '.join(a.cases)} "
-               f"--seeds {a.seeds}")
-    _case_table(a, contact_holds, "cases", contact_holds.CASES, "contact_holds", made_by)
-    print(f"wrote {a.out}/contact_holds.md, .json")
-    return 0
+    return _cases_report(a, "contact-holds", contact_holds, contact_holds.CASES, "contact_holds")
 
 
 def add_commands(sub) -> None:

@@ -29,6 +29,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, comm
                                           feasible_trajectory, fit_stance, load_protocol, posture_bounds,
                                           settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION
+from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim
@@ -262,7 +263,7 @@ def standing_controller(cfg: CollectConfig, sim_legmap) -> str:
     """The standing controller `cfg.standing` asks for on `sim_legmap` ("auto" resolved)."""
     if cfg.standing != "auto":
         return cfg.standing
-    has_ft = all(sim_legmap.legs[s].ft is not None for s in ("left", "right"))
+    has_ft = all(sim_legmap.legs[s].ft is not None for s in SIDES)
     return "cop" if cfg.mode == "contact" and has_ft else "none"
 
 

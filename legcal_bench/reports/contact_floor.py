@@ -9,14 +9,16 @@ default inter-foot calibration):
 A set the robot does not hold (HoldError) is counted as failed.
 
 On a contact floor the soles are not fixed: they sink into the floor with their load,
-tilt as the load moves between heel and toe (rocking, edge loading) and slip. The
-truth's sole poses say by how much; each share of the zero-noise contact floor is
-measured by taking that motion out of the encoders and calibrating again: each frame's
-sole motion from its stance's mean pose (a twist in the sole's frame) is split into
-tilt (about the sole's x and y), sink (along its normal) and slip (along x, y and about
-the normal), and the leg's joints are moved by the least-squares joint change that
-undoes it (the leg's sole Jacobian at the true angles). What remains with every sole
-motion removed is the rest: the IMU's motion compensation and the servos, as on weld.
+sit tilted by the load's mean moment, tilt further as the load moves between heel and
+toe (rocking) and slip. The truth's sole poses say by how much; each share of the
+zero-noise contact floor is measured by taking that part out of the encoders and
+calibrating again: each frame's departure of a sole from lying flat on the floor at its
+stance's mean place (a twist in that flat pose's frame, `sole_departure`) is split into
+`PARTS` (rocking, the stance's mean tilt, sink, slip), and the leg's joints are moved by
+the least-squares joint change that undoes the part (the leg's sole Jacobian at the true
+angles). What remains with every sole motion removed is the rest: the IMU's motion
+compensation and the servos, as on weld. Robustness cases (`ROBUSTNESS_CASES`) change
+one of the floor's parameters and skip the decomposition.
 """
 
 from __future__ import annotations
