@@ -4,22 +4,24 @@ regulation with the ankles, from the ankle force/torque sensors (issue #38).
 Position servos hold the targets the nominal model and the (offset) encoders give; on a
 real floor the offsets strain the closed chain and the posture's load moves between heel
 and toe, so each sole presses harder on one edge: it sinks unevenly into the floor
-(tilts) and, past a point, lifts that edge. The regulator moves each ankle's servo
-target so that its sole's centre of pressure stays at the sole's centre: at every
-control tick it reads the sensor's wrench, carries it to the sole's origin and frame,
-takes the centre of pressure (p_x = -tau_y / f_z, p_y = tau_x / f_z; the sign of the
-sensor's convention cancels) and integrates
+(tilts) and, past a point, lifts that edge. At every control tick (500 Hz) the regulator
+reads each ankle sensor's wrench, carries it to the sole's origin and frame and takes the
+centre of pressure (p_x = -tau_y / f_z, p_y = tau_x / f_z; the sign of the sensor's
+convention cancels). What the centre of mass asks of the soles is kept: the part of the
+whole robot's centre of pressure off the line between the soles' support centres, which
+only the soles' moments can carry (each sole its share). The rest of each sole's offset
+from its support centre is the chain's strain, and the ankle yields to it:
 
-    d(rotation of the sole against the shank)/dt = (-p_x about y, +p_y about x) / (TIME_CONSTANT_S * lever),
+    d(rotation of the sole against the shank)/dt = (+dev_y about x, -dev_x about y) / (TIME_CONSTANT_S * lever),
 
 lever = kp / f_z the centre of pressure's shift per rad of ankle target (m/rad), so the
-centre of pressure settles with that time constant whatever the robot's gains and
-weight. The sole rotation maps to the ankle joints (roles `ankle_pitch`, `ankle_roll`)
-through their columns of the sole Jacobian at the reset posture. A leg without ankle
-roll regulates pitch only. Both soles centred put the whole robot's centre of pressure
-on the line between them: where the posture's centre of mass is off that line, the
-ankles lean the body until it is over it (the ankle strategy), within the hold check's
-pelvis limit.
+deviation settles with that time constant whatever the robot's gains and weight. The
+sole rotation maps to the ankle joints (roles `ankle_pitch`, `ankle_roll`) through their
+columns of the sole Jacobian at the reset posture; a leg without ankle roll regulates
+pitch only. Two simpler laws fail: centring each sole's own centre of pressure is
+positive feedback through the body's lean (quasi-statically the ankle strategy inverts
+the sign), and keeping the load-weighted common part leaves the lateral edge loading the
+load split between the feet could carry.
 
 Only the ankle targets move; the encoders read what the joints do, so the recordings
 carry no trace of the controller beyond the postures it leads to.
