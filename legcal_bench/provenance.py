@@ -47,7 +47,10 @@ from typing import Any
 #     sank 265 um instead of 32 um (A3-like); every contact-mode set changes (kinematic and
 #     weld do not). Legs without ankle roll record the wide squat with the toes out
 #     (issue #37): their sets change, the built-ins' and the G1's do not.
-RESULTS_VERSION = 9
+# 10 = the standing controller also yields the legs to each sole's shear and twist
+#     (foot damping control, issue #38): every contact-mode set recorded with it (the
+#     default on a contact floor for robots with ankle force/torque sensors) changes.
+RESULTS_VERSION = 10
 PACKAGE = "legcal-bench"
 
 

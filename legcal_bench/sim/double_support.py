@@ -439,7 +439,8 @@ class DoubleSupportSim:
             buf["sole_rot"][i] = d.site_xmat[self._sole_sites]
             buf["pelvis_pos"][i] = d.xpos[b]
             buf["pelvis_rot"][i] = d.xmat[b]
-            buf["q_target"][i] = self._target
+            # What the servos are told: the planned target and the standing controller's corrections.
+            buf["q_target"][i] = self._target if self.regulator is None else self._target + self.regulator.u
         if self.has_ft:
             buf["ft"][i] = self.data.sensordata[self._ft_adr]
 
@@ -475,6 +476,7 @@ class DoubleSupportSim:
             "pelvis_pose_world": homogeneous_to_pos_quat(pelvis),
             "sole_drift_m": np.linalg.norm(drift[..., :3, 3], axis=-1),
             "sole_drift_rad": np.linalg.norm(Log(drift)[..., 3:], axis=-1),
+            "sole_turn_rad": np.abs(Log(drift)[..., 5]),  # of that, about the sole's normal (a twist on the floor)
             "imu_true_acc": buf["imu_true_acc"],
             "imu_true_gyro": buf["imu_true_gyro"],
             **dict(zip(("pelvis_hold_error_m", "pelvis_strain_m", "pelvis_beyond_strain_m"),

@@ -19,8 +19,10 @@ Each simulated segment is checked against documented limits:
           softer sag up to 320 mm and 5x softer fold by 210-1080 mm. (A 5 mm limit
           would reject the built-ins' own sag, which costs the calibration nothing:
           the encoders read the sagged angles.)
-  sole    a sole moving more than 2 mm (lift or slip) or tilting more than 1 deg from
-          its pose after settling (contact mode; welded soles cannot move).
+  sole    a sole moving more than 2 mm (lift or slip) or rotating more than 1 deg from
+          its pose after settling (contact mode; welded soles cannot move): tipping onto
+          an edge, or turning about its normal (a twist: the legs' strain about the
+          vertical beats the floor's friction), which the message tells apart.
 
 Measured by `DoubleSupportSim` (ground truth, never given to calibrators); checked by
 the collector, which names the stance, what moved, the likely cause and the fix.
@@ -56,6 +58,7 @@ class HoldReport:
     limits: HoldLimits = HOLD_LIMITS
     pelvis_strain_m: float = 0.0  # how far the offsets' strain alone moves the commanded pose, largest
     pelvis_excess_m: float | None = None  # the largest distance from the strained pose (None: the error itself)
+    sole_turn_rad: tuple[float, float] = (0.0, 0.0)  # of the tilt, the largest turn about the sole's normal
 
     @classmethod
     def from_truth(cls, truth: dict, leg_length: float, limits: HoldLimits = HOLD_LIMITS) -> "HoldReport":
@@ -66,7 +69,8 @@ class HoldReport:
         return cls(float(np.max(err, initial=0.0)), limits.pelvis_leg_fraction * leg_length,
                    tuple(float(v) for v in np.max(truth["sole_drift_m"], axis=0, initial=0.0)),
                    tuple(float(v) for v in np.max(truth["sole_drift_rad"], axis=0, initial=0.0)), limits,
-                   float(np.max(strain, initial=0.0)), float(np.max(beyond, initial=0.0)))
+                   float(np.max(strain, initial=0.0)), float(np.max(beyond, initial=0.0)),
+                   tuple(float(v) for v in np.max(truth.get("sole_turn_rad", np.zeros((1, 2))), axis=0, initial=0.0)))
 
     @property
     def pelvis_beyond_strain_m(self) -> float:
@@ -82,13 +86,26 @@ class HoldReport:
             out.append(f"the pelvis was {self.pelvis_m * 1e3:.1f} mm from its commanded pose{strain} "
                        f"(limit {self.pelvis_limit_m * 1e3:.1f} mm, {100 * self.limits.pelvis_leg_fraction:g} % "
                        "of the leg length)")
-        for side, move, tilt in zip(("left", "right"), self.sole_move_m, self.sole_tilt_rad):
+        for side, move, tilt, turn in zip(("left", "right"), self.sole_move_m, self.sole_tilt_rad, self.sole_turn_rad):
             if move > self.limits.sole_move_m:
                 out.append(f"the {side} sole moved {move * 1e3:.1f} mm (limit {self.limits.sole_move_m * 1e3:g} mm)")
             if tilt > self.limits.sole_tilt_rad:
-                out.append(f"the {side} sole tilted {np.rad2deg(tilt):.2f} deg "
-                           f"(limit {np.rad2deg(self.limits.sole_tilt_rad):g} deg)")
+                limit = f"(limit {np.rad2deg(self.limits.sole_tilt_rad):g} deg)"
+                out.append(f"the {side} sole twisted on the floor: it turned {np.rad2deg(tilt):.2f} deg, "
+                           f"{np.rad2deg(turn):.2f} of it about its normal {limit}" if self.twisted(tilt, turn) else
+                           f"the {side} sole tilted {np.rad2deg(tilt):.2f} deg {limit}")
         return out
+
+    @staticmethod
+    def twisted(tilt: float, turn: float) -> bool:
+        """Whether a sole's rotation is mostly a turn about its normal (a twist on the floor)."""
+        return turn > 0.5 * tilt
+
+    @property
+    def soles_twisted(self) -> bool:
+        """Whether every sole over its tilt limit turned about its normal rather than tipped."""
+        over = [(t, u) for t, u in zip(self.sole_tilt_rad, self.sole_turn_rad) if t > self.limits.sole_tilt_rad]
+        return bool(over) and all(self.twisted(t, u) for t, u in over)
 
     @property
     def held(self) -> bool:
@@ -98,4 +115,5 @@ class HoldReport:
         return {"held": self.held, "pelvis_mm": self.pelvis_m * 1e3, "pelvis_limit_mm": self.pelvis_limit_m * 1e3,
                 "pelvis_strain_mm": self.pelvis_strain_m * 1e3, "pelvis_beyond_strain_mm": self.pelvis_beyond_strain_m * 1e3,
                 "sole_move_mm": [v * 1e3 for v in self.sole_move_m],
-                "sole_tilt_deg": [float(np.rad2deg(v)) for v in self.sole_tilt_rad]}
+                "sole_tilt_deg": [float(np.rad2deg(v)) for v in self.sole_tilt_rad],
+                "sole_turn_deg": [float(np.rad2deg(v)) for v in self.sole_turn_rad]}

@@ -1,5 +1,6 @@
 """A standing controller as real robots run while they are calibrated: centre-of-pressure
-regulation with the ankles, from the ankle force/torque sensors (issue #38).
+regulation with the ankles and shear and twist yielding with the legs, from the ankle
+force/torque sensors (issue #38).
 
 Position servos hold the targets the nominal model and the (offset) encoders give; on a
 real floor the offsets strain the closed chain and the posture's load moves between heel
@@ -23,8 +24,20 @@ positive feedback through the body's lean (quasi-statically the ankle strategy i
 the sign), and keeping the load-weighted common part leaves the lateral edge loading the
 load split between the feet could carry.
 
-Only the ankle targets move; the encoders read what the joints do, so the recordings
-carry no trace of the controller beyond the postures it leads to.
+The same strain pushes the soles sideways and twists them about their normals: standing
+still, the floor's horizontal forces on the two soles cancel (but for the body's small
+accelerations, taken out as their mean) and so does nothing ask for a twist, so all of
+it is the legs' disagreement, and stiff hip-yaw servos with yaw offsets of opposite sign
+twist a sole on the floor beyond friction (+-3.5 deg turned the A3-like robot's
+right sole 1.5 deg: tests/sim/test_standing.py). Each leg
+yields to its sole's shear and twist as foot damping control does (Kajita et al., 2010):
+the sole's twist that relieves the wrench w with the time constant above is the leg's
+compliance J K^-1 J' times w over it, of which the slide and the turn about the normal
+are asked for (tilt and height held), mapped to the leg's joints in least squares.
+
+The corrections are capped (MAX_CORRECTION_RAD per joint). Only the targets move; the
+encoders read what the joints do, so the recordings carry no trace of the controller
+beyond the postures it leads to.
 """
 
 from __future__ import annotations
@@ -38,11 +51,13 @@ STANDING_CONTROLLERS = ("none", "cop")
 TIME_CONSTANT_S = 0.1  # the centre of pressure's settling time constant
 CONTROL_PERIOD_S = 0.002  # 500 Hz, as real standing controllers run
 MIN_LOAD_FRACTION = 0.05  # a sole carrying less of the robot's weight is not regulated
-MAX_CORRECTION_RAD = np.deg2rad(5.0)  # the regulator's authority per ankle joint
+MAX_CORRECTION_RAD = np.deg2rad(5.0)  # the regulator's authority per joint
+SHEAR_SIGN = -1.0  # the ankle sensors' force and yaw moment as the floor's wrench on the sole
 
 
 class CopRegulator:
-    """Ankle target corrections (n,) keeping each sole's centre of pressure at its centre."""
+    """Leg target corrections (n,): the ankles keep each sole's centre of pressure where the
+    centre of mass asks, the legs yield to each sole's shear and twist."""
 
     def __init__(self, model: mujoco.MjModel, scene, kin, physics_dt: float):
         legmap = kin.legmap
@@ -64,9 +79,11 @@ class CopRegulator:
         self.kin = kin
         # Each sole's support centre (its corners' centroid) in its frame.
         self.centre = [np.mean(kin.corners[s], axis=0) for s in SIDES]
+        self.legs = [list(range(legmap.n_joints))[legmap.leg_slice(s)] for s in SIDES]
         self.u = np.zeros(legmap.n_joints)
         self.tick = 0
         self.maps = None
+        self.shear_maps = None
 
     def reset(self, q: np.ndarray) -> None:
         """Start from no correction; the ankle-to-sole-rotation maps at angles `q` (n,)."""
@@ -74,6 +91,7 @@ class CopRegulator:
 
         self.u[:] = 0.0
         self.tick = 0
+        self._wrench = [None, None]
         fk = frame_kinematics(self.kin, np.asarray(q, dtype=float)[None])
         self.maps = []
         for k, (side, J) in enumerate(zip(SIDES, (fk.J_L[0], fk.J_R[0]))):
@@ -82,6 +100,18 @@ class CopRegulator:
             # Joint change -> sole rotation about its x and y (rad per rad); inverted in
             # least squares (pitch only without an ankle roll).
             self.maps.append(np.linalg.pinv(J[3:5][:, local]))
+        # Shear and yaw: the sole's twist that relieves a strain wrench w (sole frame, at
+        # its origin) with time constant TIME_CONSTANT_S is the leg's compliance J K^-1 J'
+        # times w over it; of that twist only the slide (x, y) and the turn about the
+        # normal are asked for, the rest held at zero, and it maps back to the leg's
+        # joints in least squares (a five-joint leg does what it can).
+        self.shear_maps = []
+        for side, J in zip(SIDES, (fk.J_L[0], fk.J_R[0])):
+            cols = self.legs[SIDES.index(side)]
+            compliance = (J / self.kp[cols]) @ J.T
+            asked = np.zeros((6, 6))
+            asked[[0, 1, 5], [0, 1, 5]] = 1.0
+            self.shear_maps.append(np.linalg.pinv(asked @ J) @ asked @ compliance[:, [0, 1, 5]])
 
     def centre_of_pressure(self, data: mujoco.MjData, k: int) -> tuple[np.ndarray, np.ndarray, float] | None:
         """(sole `k`'s centre of pressure and its support centre, both in the world (3,),
@@ -97,6 +127,7 @@ class CopRegulator:
         f_s, tau_s = R_s.T @ f, R_s.T @ tau
         if abs(f_s[2]) < MIN_LOAD_FRACTION * self.weight:
             return None
+        self._wrench[k] = f, tau_s[2]
         return o + R_s @ np.array([-tau_s[1] / f_s[2], tau_s[0] / f_s[2], 0.0]), o + R_s @ self.centre[k], abs(f_s[2])
 
     def step(self, data: mujoco.MjData) -> np.ndarray:
@@ -125,4 +156,17 @@ class CopRegulator:
             rate = np.array([dev[1], -dev[0]]) / (TIME_CONSTANT_S * lever)  # yield: sole rotation about x, y (rad/s)
             self.u[cols] = np.clip(self.u[cols] + self.dt * (self.maps[k] @ rate), -MAX_CORRECTION_RAD,
                                    MAX_CORRECTION_RAD)
+        # Shear and yaw: standing still, the floor pushes the soles sideways and twists
+        # them only because the legs disagree (the two soles' horizontal forces cancel
+        # but for the body's small accelerations, taken out as their mean), and each
+        # leg yields to what its sole feels (foot damping control).
+        (f1, t1), (f2, t2) = self._wrench
+        mean = (f1 + f2) / 2
+        for k, (f, tz) in enumerate(((f1, t1), (f2, t2))):
+            R_s = data.site_xmat[self.sole_site[k]].reshape(3, 3)
+            shear = R_s.T @ np.r_[(f - mean)[:2], 0.0]
+            w = SHEAR_SIGN * np.array([shear[0], shear[1], tz])
+            cols = self.legs[k]
+            self.u[cols] = np.clip(self.u[cols] + (self.dt / TIME_CONSTANT_S) * (self.shear_maps[k] @ w),
+                                   -MAX_CORRECTION_RAD, MAX_CORRECTION_RAD)
         return self.u

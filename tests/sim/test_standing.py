@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from legcal_bench.data.recording import list_segments, load_truth
-from legcal_bench.errors import ConfigError
+from legcal_bench.errors import ConfigError, HoldError
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.reports.contact_floor import PARTS, sole_departure
 from legcal_bench.robots import load_robot
@@ -59,3 +59,23 @@ def test_a_robot_without_ankle_sensors_is_refused_the_controller_naming_the_fix(
     from legcal_bench.protocol.collect import standing_controller
 
     assert standing_controller(CollectConfig(mode="contact"), lm) == "none"
+
+
+def test_the_legs_yield_to_a_twist_the_hip_yaw_offsets_put_on_the_soles(tmp_path):
+    """Hip-yaw offsets of opposite sign (+-3.5 deg) make the legs disagree about the
+    soles' heading by 7 deg; stiff yaw servos then twist a sole on the floor beyond
+    friction. The controller's shear and yaw part (foot damping control) yields the
+    legs to the twist: the soles stay put. The message names the twist."""
+    a3 = load_robot("a3")
+    offsets = np.zeros(a3.n_joints)
+    names = list(a3.joint_names)
+    offsets[names.index("left_hip_yaw_joint")], offsets[names.index("right_hip_yaw_joint")] = np.deg2rad([3.5, -3.5])
+    cfg = dict(robot="a3", offsets=tuple(offsets), **{k: v for k, v in SHORT.items() if k != "sensors"},
+               sensors="zero")
+    with pytest.raises(HoldError, match=r"the \w+ sole twisted on the floor: it turned 1\.\d\d deg, 1\.\d\d of it "
+                                        r"about its normal .*Likely cause: the legs disagree .*Fix: stand with the "
+                                        r"standing controller \(--standing cop\)"):
+        collect(CollectConfig(standing="none", **cfg), tmp_path / "none", progress=False)
+    held = collect(CollectConfig(standing="cop", **cfg), tmp_path / "cop", progress=False)
+    worst = max(max(g.hold["sole_tilt_deg"]) for g in held.segments)
+    assert worst < 0.05, worst
