@@ -84,6 +84,8 @@ TARGETS = {
     "collect_kinematic_x_real_time": ("kinematic collection, x real time", None),
     "collect_weld_frames_per_s": ("weld collection, frames/s", None),
     "collect_weld_x_real_time": ("weld collection, x real time", None),
+    "collect_contact_frames_per_s": ("contact collection (the standing controller's default), frames/s", None),
+    "collect_contact_x_real_time": ("contact collection, x real time", None),
     "help": ("`legcal-bench --help`, s", _at_most(0.5)),
     "calibrate_help": ("`legcal-bench calibrate --help`, s", _at_most(0.5)),
     "calibrate_bad_flag": ("`legcal-bench calibrate --no-such-flag` (argument error), s", _at_most(0.5)),

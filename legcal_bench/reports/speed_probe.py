@@ -62,7 +62,9 @@ def probe(data: str, robot: str, repeats: int, collect_repeats: int, only: str |
                               "offsets": [runs[0].offsets_rad[n] for n in lm.joint_names]}
         if key == "total":  # each stage of the calibrator's own timing (`timing_s`)
             out["cases"][name]["stages"] = {k: [r.timing_s[k] for r in runs] for k in runs[0].timing_s}
-    for mode in ("kinematic", "weld") if only != "calibration" else ():
+    # Contact: the default collection there, with the standing controller where the robot
+    # has ankle force/torque sensors (from issue #38 on; before, the servos alone).
+    for mode in ("kinematic", "weld", "contact") if only != "calibration" else ():
         rates = []
         for _ in range(collect_repeats):
             with tempfile.TemporaryDirectory() as tmp:

@@ -333,10 +333,14 @@ class DoubleSupportSim:
         sc, d, mj_step = self.scene, self.data, mujoco.mj_step
         m = sc.model
         pos_act, pos_cols, motors = sc.servo
-        if self.regulator is not None:  # the standing controller's ankle corrections, step by step
+        if self.regulator is not None:  # the standing controller's corrections, tick by tick
             reg = self.regulator
+            direct = pos_cols is None and motors is None
             for target in targets:
-                apply_servos(sc, d, target + reg.step(d))
+                if direct:
+                    d.ctrl[pos_act] = target + reg.step(d)
+                else:
+                    apply_servos(sc, d, target + reg.step(d))
                 mj_step(m, d)
             return
         if pos_cols is None and motors is None:  # every leg joint on a position actuator, in order

@@ -42,6 +42,8 @@ beyond the postures it leads to.
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 
@@ -67,106 +69,124 @@ class CopRegulator:
         self.kp = np.asarray(scene.servo_kp, dtype=float)
         self.weight = float(sum(model.body_mass)) * 9.81
         adr = scene.sensor_adr
-        self.force_adr = [np.arange(adr[f"{s}_force"], adr[f"{s}_force"] + 3) for s in SIDES]
-        self.torque_adr = [np.arange(adr[f"{s}_torque"], adr[f"{s}_torque"] + 3) for s in SIDES]
-        self.ft_site = [int(model.sensor_objid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR, f"legcal_{s}_force")])
-                        for s in SIDES]  # the force sensor's site
-        self.sole_site = [scene.sole_site[s] for s in SIDES]
-        self.ankles = []
-        for side in SIDES:
-            cols = list(range(legmap.n_joints))[legmap.leg_slice(side)]
-            self.ankles.append([c for c in cols if legmap.joint_roles[c] in ("ankle_pitch", "ankle_roll")])
+        self.force_adr = np.array([np.arange(adr[f"{s}_force"], adr[f"{s}_force"] + 3) for s in SIDES])
+        self.torque_adr = np.array([np.arange(adr[f"{s}_torque"], adr[f"{s}_torque"] + 3) for s in SIDES])
+        self.ft_site = np.array([int(model.sensor_objid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR,
+                                                                          f"legcal_{s}_force")]) for s in SIDES])
+        self.sole_site = np.array([scene.sole_site[s] for s in SIDES])
+        n = legmap.n_joints
+        self.legs = [list(range(n))[legmap.leg_slice(s)] for s in SIDES]
+        self.ankles = [[c for c in cols if legmap.joint_roles[c] in ("ankle_pitch", "ankle_roll")] for cols in self.legs]
         self.kin = kin
-        # Each sole's support centre (its corners' centroid) in its frame.
-        self.centre = [np.mean(kin.corners[s], axis=0) for s in SIDES]
-        self.legs = [list(range(legmap.n_joints))[legmap.leg_slice(s)] for s in SIDES]
-        self.u = np.zeros(legmap.n_joints)
+        # Each sole's support centre (its corners' centroid) in its frame (2, 3).
+        self.centre = np.array([np.mean(kin.corners[s], axis=0) for s in SIDES])
+        # m of centre of pressure per rad of ankle target, times the sole's load: kp / f_z.
+        self.ankle_kp = [float(np.mean(self.kp[cols])) for cols in self.ankles]
+        self.centre_list = [tuple(float(v) for v in c) for c in self.centre]
+        self.min_load = MIN_LOAD_FRACTION * self.weight
+        self.u = np.zeros(n)
         self.tick = 0
-        self.maps = None
-        self.shear_maps = None
+        # (n, 10): both soles' rotation rates about x, y, then both soles' strain wrenches
+        # (f_x, f_y, tau_z) -> the corrections' rates.
+        self.drive_map = None
 
     def reset(self, q: np.ndarray) -> None:
-        """Start from no correction; the ankle-to-sole-rotation maps at angles `q` (n,)."""
+        """Start from no correction; the maps from sole motion to joints at angles `q` (n,)."""
         from legcal_bench.robots.kinematics import frame_kinematics
 
         self.u[:] = 0.0
         self.tick = 0
-        self._wrench = [None, None]
         fk = frame_kinematics(self.kin, np.asarray(q, dtype=float)[None])
-        self.maps = []
-        for k, (side, J) in enumerate(zip(SIDES, (fk.J_L[0], fk.J_R[0]))):
-            cols = list(range(self.kin.legmap.n_joints))[self.kin.legmap.leg_slice(side)]
+        n = len(self.u)
+        self.drive_map = np.zeros((n, 10))
+        rotation_map, shear_map = self.drive_map[:, :4], self.drive_map[:, 4:]
+        asked = np.zeros((6, 6))
+        asked[[0, 1, 5], [0, 1, 5]] = 1.0
+        for k, J in enumerate((fk.J_L[0], fk.J_R[0])):
+            cols = self.legs[k]
             local = [cols.index(c) for c in self.ankles[k]]
             # Joint change -> sole rotation about its x and y (rad per rad); inverted in
             # least squares (pitch only without an ankle roll).
-            self.maps.append(np.linalg.pinv(J[3:5][:, local]))
-        # Shear and yaw: the sole's twist that relieves a strain wrench w (sole frame, at
-        # its origin) with time constant TIME_CONSTANT_S is the leg's compliance J K^-1 J'
-        # times w over it; of that twist only the slide (x, y) and the turn about the
-        # normal are asked for, the rest held at zero, and it maps back to the leg's
-        # joints in least squares (a five-joint leg does what it can).
-        self.shear_maps = []
-        for side, J in zip(SIDES, (fk.J_L[0], fk.J_R[0])):
-            cols = self.legs[SIDES.index(side)]
+            rotation_map[self.ankles[k], 2 * k:2 * k + 2] = np.linalg.pinv(J[3:5][:, local])
+            # Shear and yaw: the sole's twist that relieves a strain wrench w (sole frame,
+            # at its origin) with time constant TIME_CONSTANT_S is the leg's compliance
+            # J K^-1 J' times w over it; of that twist only the slide (x, y) and the turn
+            # about the normal are asked for, the rest held at zero, and it maps back to
+            # the leg's joints in least squares (a five-joint leg does what it can).
             compliance = (J / self.kp[cols]) @ J.T
-            asked = np.zeros((6, 6))
-            asked[[0, 1, 5], [0, 1, 5]] = 1.0
-            self.shear_maps.append(np.linalg.pinv(asked @ J) @ asked @ compliance[:, [0, 1, 5]])
-
-    def centre_of_pressure(self, data: mujoco.MjData, k: int) -> tuple[np.ndarray, np.ndarray, float] | None:
-        """(sole `k`'s centre of pressure and its support centre, both in the world (3,),
-        its normal force) from its ankle sensor; None if it carries too little load to say."""
-        R_f = data.site_xmat[self.ft_site[k]].reshape(3, 3)
-        R_s = data.site_xmat[self.sole_site[k]].reshape(3, 3)
-        o = data.site_xpos[self.sole_site[k]]
-        f = R_f @ data.sensordata[self.force_adr[k]]
-        tau = R_f @ data.sensordata[self.torque_adr[k]]
-        r = data.site_xpos[self.ft_site[k]] - o
-        # r x f written out: np.cross costs more than the rest of the update at 500 Hz.
-        tau = tau + np.array([r[1] * f[2] - r[2] * f[1], r[2] * f[0] - r[0] * f[2], r[0] * f[1] - r[1] * f[0]])
-        f_s, tau_s = R_s.T @ f, R_s.T @ tau
-        if abs(f_s[2]) < MIN_LOAD_FRACTION * self.weight:
-            return None
-        self._wrench[k] = f, tau_s[2]
-        return o + R_s @ np.array([-tau_s[1] / f_s[2], tau_s[0] / f_s[2], 0.0]), o + R_s @ self.centre[k], abs(f_s[2])
+            shear_map[cols, 3 * k:3 * k + 3] = (np.linalg.pinv(asked @ J) @ asked @ compliance[:, [0, 1, 5]]
+                                                     / TIME_CONSTANT_S)
 
     def step(self, data: mujoco.MjData) -> np.ndarray:
-        """Called once per physics step; returns the ankle target corrections (n,)."""
+        """Called once per physics step; returns the target corrections (n,)."""
         self.tick += 1
-        if self.tick % self.every:
-            return self.u
-        got = [self.centre_of_pressure(data, k) for k in range(2)]
-        if any(g is None for g in got):
-            return self.u
+        if self.tick % self.every == 0:
+            self.update(data)
+        return self.u
+
+    def update(self, data: mujoco.MjData) -> None:
+        """One control tick: both soles' wrenches from the ankle sensors, the corrections moved.
+        Written in Python floats: at 500 Hz, numpy's per-call cost on 3-vectors was twice
+        the physics' (`legcal-bench bench-speed --groups contact`)."""
+        xmat, xpos, sd = data.site_xmat, data.site_xpos, data.sensordata
+        soles = []
+        for k in (0, 1):
+            Rf, Rs = xmat[self.ft_site[k]].tolist(), xmat[self.sole_site[k]].tolist()
+            o, at = xpos[self.sole_site[k]].tolist(), xpos[self.ft_site[k]].tolist()
+            a, b = self.force_adr[k, 0], self.torque_adr[k, 0]
+            f, tau = _mv(Rf, sd[a:a + 3].tolist()), _mv(Rf, sd[b:b + 3].tolist())  # world frame
+            r = (at[0] - o[0], at[1] - o[1], at[2] - o[2])  # carried from the sensor to the sole's origin
+            tau = (tau[0] + r[1] * f[2] - r[2] * f[1], tau[1] + r[2] * f[0] - r[0] * f[2],
+                   tau[2] + r[0] * f[1] - r[1] * f[0])
+            f_s, tau_s = _mtv(Rs, f), _mtv(Rs, tau)  # the sole's frame
+            if abs(f_s[2]) < self.min_load:  # a sole too lightly loaded to say
+                return
+            cx, cy, cz = self.centre_list[k]
+            # The centre of pressure relative to the support centre, in the sole's frame.
+            cop = (-tau_s[1] / f_s[2] - cx, tau_s[0] / f_s[2] - cy, -cz)
+            c = _mv(Rs, self.centre_list[k])
+            c = (o[0] + c[0], o[1] + c[1], o[2] + c[2])  # the support centre in the world
+            p = _mv(Rs, cop)
+            soles.append((Rs, f, tau_s, abs(f_s[2]), cop, c, (c[0] + p[0], c[1] + p[1])))
         # What the centre of mass asks of the soles stays: the whole robot's centre of
         # pressure, whose part off the line between the soles' centres only the soles'
         # moments can carry (each sole its share); along that line the load split carries
         # it. The rest of each sole's moment is what the closed chain's strain puts on it,
         # and the ankles yield to it.
-        (p1, c1, f1), (p2, c2, f2) = got
-        total = (f1 * p1 + f2 * p2) / (f1 + f2)
-        e = (c2 - c1)[:2] / np.linalg.norm((c2 - c1)[:2])
-        d = (total - c1)[:2]
-        off_line = np.r_[d - (d @ e) * e, 0.0]
-        for k, (p, c, fz) in enumerate(got):
-            R_s = data.site_xmat[self.sole_site[k]].reshape(3, 3)
-            dev = (R_s.T @ (p - c - off_line))[:2]  # in the sole's frame
-            cols = self.ankles[k]
-            lever = np.mean(self.kp[cols]) / fz  # m of centre of pressure per rad of ankle target
-            rate = np.array([dev[1], -dev[0]]) / (TIME_CONSTANT_S * lever)  # yield: sole rotation about x, y (rad/s)
-            self.u[cols] = np.clip(self.u[cols] + self.dt * (self.maps[k] @ rate), -MAX_CORRECTION_RAD,
-                                   MAX_CORRECTION_RAD)
-        # Shear and yaw: standing still, the floor pushes the soles sideways and twists
-        # them only because the legs disagree (the two soles' horizontal forces cancel
-        # but for the body's small accelerations, taken out as their mean), and each
-        # leg yields to what its sole feels (foot damping control).
-        (f1, t1), (f2, t2) = self._wrench
-        mean = (f1 + f2) / 2
-        for k, (f, tz) in enumerate(((f1, t1), (f2, t2))):
-            R_s = data.site_xmat[self.sole_site[k]].reshape(3, 3)
-            shear = R_s.T @ np.r_[(f - mean)[:2], 0.0]
-            w = SHEAR_SIGN * np.array([shear[0], shear[1], tz])
-            cols = self.legs[k]
-            self.u[cols] = np.clip(self.u[cols] + (self.dt / TIME_CONSTANT_S) * (self.shear_maps[k] @ w),
-                                   -MAX_CORRECTION_RAD, MAX_CORRECTION_RAD)
-        return self.u
+        (_, _, _, l1, _, c1, p1), (_, _, _, l2, _, c2, p2) = soles
+        tx, ty = (l1 * p1[0] + l2 * p2[0]) / (l1 + l2), (l1 * p1[1] + l2 * p2[1]) / (l1 + l2)
+        ex, ey = c2[0] - c1[0], c2[1] - c1[1]
+        norm = math.hypot(ex, ey)
+        ex, ey = ex / norm, ey / norm
+        dx, dy = tx - c1[0], ty - c1[1]
+        along = dx * ex + dy * ey
+        off = (dx - along * ex, dy - along * ey, 0.0)
+        mx, my = (soles[0][1][0] + soles[1][1][0]) / 2, (soles[0][1][1] + soles[1][1][1]) / 2
+        drive = []
+        for k, (Rs, f, tau_s, load, cop, _, _) in enumerate(soles):
+            o_s = _mtv(Rs, off)
+            dev_x, dev_y = cop[0] - o_s[0], cop[1] - o_s[1]  # in the sole's frame
+            # Yield: sole rotation about x, y (rad/s) = the strain moment over the ankles' stiffness.
+            gain = load / (TIME_CONSTANT_S * self.ankle_kp[k])
+            drive += [dev_y * gain, -dev_x * gain]
+        for k, (Rs, f, tau_s, _, _, _, _) in enumerate(soles):
+            # Shear and yaw: standing still, the floor pushes the soles sideways and twists
+            # them only because the legs disagree (the two soles' horizontal forces cancel
+            # but for the body's small accelerations, taken out as their mean), and each
+            # leg yields to what its sole feels (foot damping control).
+            shear = _mtv(Rs, (f[0] - mx, f[1] - my, 0.0))
+            drive += [SHEAR_SIGN * shear[0], SHEAR_SIGN * shear[1], SHEAR_SIGN * tau_s[2]]
+        u = self.u + self.dt * (self.drive_map @ np.array(drive))
+        np.clip(u, -MAX_CORRECTION_RAD, MAX_CORRECTION_RAD, out=self.u)
+
+
+def _mv(R: list, v) -> tuple:
+    """R v for a row-major 3x3 list R (9,) and a 3-vector."""
+    return (R[0] * v[0] + R[1] * v[1] + R[2] * v[2], R[3] * v[0] + R[4] * v[1] + R[5] * v[2],
+            R[6] * v[0] + R[7] * v[1] + R[8] * v[2])
+
+
+def _mtv(R: list, v) -> tuple:
+    """R' v for a row-major 3x3 list R (9,) and a 3-vector."""
+    return (R[0] * v[0] + R[3] * v[1] + R[6] * v[2], R[1] * v[0] + R[4] * v[1] + R[7] * v[2],
+            R[2] * v[0] + R[5] * v[1] + R[8] * v[2])
