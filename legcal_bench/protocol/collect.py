@@ -221,17 +221,23 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
     sc = sim.scene
     left = sim.sim_legmap.leg_slice("left")
     gains = ", ".join(f"{n} {kp:.0f}" for n, kp in zip(sim.sim_legmap.joint_names[left], sc.servo_kp[left]))
-    pelvis = report.pelvis_beyond_strain_m > report.pelvis_limit_m
+    fell = report.fell
+    pelvis = not fell and report.pelvis_beyond_strain_m > report.pelvis_limit_m
     lacking = sim.sim_legmap.absent_roles
-    twisted = not pelvis and report.soles_twisted
-    cause = ("the servos are too soft for the robot's weight (it sags or folds)" if pelvis else
+    twisted = not pelvis and not fell and report.soles_twisted
+    cause = ("the posture with these offsets puts the robot off balance (the offsets move the centre of mass "
+             "against the soles), or the servos cannot carry its weight" if fell else
+             "the servos are too soft for the robot's weight (it sags or folds)" if pelvis else
              "the legs disagree (the offsets strain the closed chain) and twist a sole on the floor harder than "
              "friction holds it" if twisted else
              "the posture tips the robot onto a sole edge, or a sole slips" + (
                  f"; legs without {', '.join(lacking)} cannot level a sole that the offsets of the joints above "
                  "it tilt (the hip roll's tilts it by as much), so on a contact floor it stands on an edge"
                  if lacking and sim.mode == "contact" else ""))
-    fix = ("give stiffer gains as servo_gains.<joint>: [kp, kd] in the leg map (the default is k_role * m g L, "
+    fix = ("record this stance smaller (a protocol file with a smaller scale, --protocol) or leave it out "
+           "(--stances); if the robot falls in every stance, give stiffer gains as servo_gains.<joint>: [kp, kd] "
+           "in the leg map" if fell else
+           "give stiffer gains as servo_gains.<joint>: [kp, kd] in the leg map (the default is k_role * m g L, "
            "see legcal_bench.protocol.servos)" if pelvis else
            ("stand with the standing controller (--standing cop), which yields the legs to the strain; it reads the "
             "ankle force/torque sensors (legs.<side>.ft in the leg map)" if sim.regulator is None else

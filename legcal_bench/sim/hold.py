@@ -22,7 +22,8 @@ Each simulated segment is checked against documented limits:
   sole    a sole moving more than 2 mm (lift or slip) or rotating more than 1 deg from
           its pose after settling (contact mode; welded soles cannot move): tipping onto
           an edge, or turning about its normal (a twist: the legs' strain about the
-          vertical beats the floor's friction), which the message tells apart.
+          vertical beats the floor's friction), which the message tells apart; a sole
+          more than 50 mm away or turned more than 30 deg fell with the robot.
 
 Measured by `DoubleSupportSim` (ground truth, never given to calibrators); checked by
 the collector, which names the stance, what moved, the likely cause and the fix.
@@ -45,6 +46,7 @@ class HoldLimits:
 
 HOLD_LIMITS = HoldLimits()
 STRAIN_SHOWN_M = 5e-4  # a smaller strain is left out of the pelvis's failure message
+FALL_MOVE_M, FALL_TILT_RAD = 0.05, float(np.deg2rad(30.0))  # beyond either, a sole fell with the robot
 
 
 @dataclass(frozen=True)
@@ -76,8 +78,19 @@ class HoldReport:
     def pelvis_beyond_strain_m(self) -> float:
         return self.pelvis_m if self.pelvis_excess_m is None else self.pelvis_excess_m
 
+    @property
+    def fell(self) -> bool:
+        """Whether the robot fell: a sole moved or turned far beyond anything standing does
+        (FALL_MOVE_M, FALL_TILT_RAD), not a slip or an edge."""
+        return max(self.sole_move_m) > FALL_MOVE_M or max(self.sole_tilt_rad) > FALL_TILT_RAD
+
     def failures(self) -> list[str]:
         """What moved beyond its limit, in words (empty: the robot held)."""
+        if self.fell:
+            side = int(np.argmax(self.sole_move_m))
+            return [f"the robot fell: the {('left', 'right')[side]} sole moved {self.sole_move_m[side] * 1e3:.0f} mm "
+                    f"and turned {np.rad2deg(self.sole_tilt_rad[side]):.0f} deg, the pelvis ended "
+                    f"{self.pelvis_m * 1e3:.0f} mm from its commanded pose"]
         out = []
         if self.pelvis_beyond_strain_m > self.pelvis_limit_m:
             strain = (f", {self.pelvis_beyond_strain_m * 1e3:.1f} mm from where the offsets' strain of the closed "

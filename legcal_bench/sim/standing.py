@@ -28,9 +28,9 @@ The same strain pushes the soles sideways and twists them about their normals: s
 still, the floor's horizontal forces on the two soles cancel (but for the body's small
 accelerations, taken out as their mean) and so does nothing ask for a twist, so all of
 it is the legs' disagreement, and stiff hip-yaw servos with yaw offsets of opposite sign
-twist a sole on the floor beyond friction (+-3.5 deg turned the A3-like robot's
-right sole 1.5 deg: tests/sim/test_standing.py). Each leg
-yields to its sole's shear and twist as foot damping control does (Kajita et al., 2010):
+twist a sole on the floor beyond friction (+-3.5 deg turned the A3-like robot's right
+sole 1.5 deg: tests/sim/test_standing.py). Each leg yields to its sole's shear and twist
+as foot damping control does (Kajita et al., 2010):
 the sole's twist that relieves the wrench w with the time constant above is the leg's
 compliance J K^-1 J' times w over it, of which the slide and the turn about the normal
 are asked for (tilt and height held), mapped to the leg's joints in least squares.
@@ -127,7 +127,7 @@ class CopRegulator:
     def update(self, data: mujoco.MjData) -> None:
         """One control tick: both soles' wrenches from the ankle sensors, the corrections moved.
         Written in Python floats: at 500 Hz, numpy's per-call cost on 3-vectors was twice
-        the physics' (`legcal-bench bench-speed --groups contact`)."""
+        the physics' (`legcal-bench bench-speed --groups collection`, its contact case)."""
         xmat, xpos, sd = data.site_xmat, data.site_xpos, data.sensordata
         soles = []
         for k in (0, 1):

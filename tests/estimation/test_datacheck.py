@@ -127,6 +127,15 @@ DEFECTS = [
 ]
 
 
+def defects_on_another_robot(slow: tuple[str, ...]):
+    """DEFECTS as test parameters, the named ones `slow`: on a robot other than the
+    A3-like one, the defects whose wrong model makes the solve long (10-20 s each: a
+    knee read reversed, the IMU's x and z exchanged) run in `make test-slow` when that
+    robot's kinematics do not bear on them; the test command runs them on the A3-like
+    robot with both calibrators."""
+    return [pytest.param(*d, id=d[0], marks=[pytest.mark.slow] if d[0] in slow else []) for d in DEFECTS]
+
+
 # The G1's cases are in test_datacheck_g1.py: a group of their own, so the two robots'
 # cases run side by side under pytest-xdist, each robot's recordings collected once.
 @pytest.mark.parametrize("calibrator", ["interfoot", "yamane"])

@@ -64,10 +64,17 @@ def test_leg_odometry_follows_the_walk_and_a_hip_pitch_offset_tilts_it():
 
 
 @needs_g1
-def test_the_closed_loop_suite_gives_every_variant_a_row_and_resumes(tmp_path, capsys):
+def test_the_closed_loop_suite_gives_every_variant_a_row_and_resumes(tmp_path, capsys, monkeypatch):
+    from dataclasses import replace
+
+    import legcal_bench.benchmark.closed_loop as suite
     from legcal_bench.benchmark.plan import plan
     from legcal_bench.cli import main
     from legcal_bench.errors import ConfigError
+
+    # 4 s walks instead of the suite's 20 s: the rows and the resume are what this tests.
+    configs = suite.suite_configs
+    monkeypatch.setattr(suite, "suite_configs", lambda *a, **k: [replace(c, seconds=4.0) for c in configs(*a, **k)])
 
     with pytest.raises(ConfigError, match="walks, it has no static cells"):
         plan("closed-loop")

@@ -47,3 +47,16 @@ def test_servos_too_soft_are_named_with_what_the_strain_does_not_explain(tmp_pat
                                         r"the offsets' strain of the closed chain puts it \(\d\.\d mm from that pose\)"
                                         r".*Likely cause: the servos are too soft"):
         collect(CollectConfig(robot="a3", offsets="paper", **ONE_LUNGE), Path(tmp_path) / "set", progress=False)
+
+
+def test_a_fall_is_called_a_fall_not_a_twist_or_soft_servos():
+    """A sole hundreds of millimetres away and turned over fell with the robot: the
+    message says so, not that it twisted on the floor or that the servos sag."""
+    from legcal_bench.sim.hold import HoldReport
+
+    fallen = HoldReport(0.34, 0.0468, (0.374, 0.0003), (np.deg2rad(179.1), np.deg2rad(0.2)),
+                        pelvis_excess_m=0.34, sole_turn_rad=(np.deg2rad(123.2), 0.0))
+    assert fallen.fell and fallen.failures() == [
+        "the robot fell: the left sole moved 374 mm and turned 179 deg, the pelvis ended 340 mm from its commanded pose"]
+    twisted = HoldReport(0.01, 0.0468, (0.0029, 0.0), (np.deg2rad(1.83), 0.0), sole_turn_rad=(np.deg2rad(1.83), 0.0))
+    assert not twisted.fell and twisted.soles_twisted and "twisted on the floor" in twisted.failures()[1]
