@@ -49,4 +49,10 @@ class CalibrationError(LegcalError):
 class HoldError(LegcalError):
     """The simulated robot did not hold a posture (it folded, tipped or slid): its
     recording would not be static double-support data. The message names the stance,
-    what moved, the likely cause and the leg-map field that fixes it."""
+    what moved, the likely cause and the leg-map field that fixes it; `report` is the
+    hold check's `HoldReport` where the check raised it (None otherwise, and after
+    crossing a process boundary)."""
+
+    def __init__(self, message: str, report=None):
+        super().__init__(message)
+        self.report = report

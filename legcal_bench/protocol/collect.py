@@ -247,7 +247,7 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
     raise HoldError(
         f"segment {name}, stance {stance} ({label or ALL_STANCES[stance].label}, {sim.mode} mode): the robot did not hold "
         f"the posture: {'; '.join(failures)}. Likely cause: {cause} (left-leg kp in use, N m/rad: {gains}; "
-        f"sources {sorted(set(sc.servo_source))}{'; ' + gains_note if gains_note else ''}). Fix: {fix}.")
+        f"sources {sorted(set(sc.servo_source))}{'; ' + gains_note if gains_note else ''}). Fix: {fix}.", report)
 
 
 def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> CollectSummary:

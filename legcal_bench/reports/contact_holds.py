@@ -10,7 +10,6 @@ that fails is counted with the check's reason (sole or pelvis)."""
 
 from __future__ import annotations
 
-import re
 import tempfile
 from pathlib import Path
 
@@ -48,10 +47,9 @@ def run_case(robot: str, case: str, seed: int) -> dict:
         try:
             summary = collect(CollectConfig(robot=robot, mode="contact", standing=case, seed=seed, heldout=0,
                                             offsets=offsets_for(legmap, seed)), Path(work) / "set", progress=False)
-        except HoldError as e:
-            text = str(e)
-            sole = bool(re.search(r"sole (moved|tilted)", text))
-            return {**row, "held": False, "why": "sole" if sole else "pelvis", "message": text}
+        except HoldError as e:  # the hold check's report says what failed; other refusals count as the pelvis's
+            sole = e.report is not None and e.report.soles_failed
+            return {**row, "held": False, "why": "sole" if sole else "pelvis", "message": str(e)}
     def largest(v):  # per-sole lists and scalars alike
         return max(v) if isinstance(v, list) else v
 

@@ -335,12 +335,8 @@ class DoubleSupportSim:
         pos_act, pos_cols, motors = sc.servo
         if self.regulator is not None:  # the standing controller's corrections, tick by tick
             reg = self.regulator
-            direct = pos_cols is None and motors is None
             for target in targets:
-                if direct:
-                    d.ctrl[pos_act] = target + reg.step(d)
-                else:
-                    apply_servos(sc, d, target + reg.step(d))
+                apply_servos(sc, d, target + reg.step(d))
                 mj_step(m, d)
             return
         if pos_cols is None and motors is None:  # every leg joint on a position actuator, in order
@@ -468,6 +464,7 @@ class DoubleSupportSim:
     def _truth(self, buf: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
         soles, pelvis = self._world_poses(buf)
         drift = inverse(self._sole_ref) @ soles  # each sole relative to its pose at reset
+        rotation = Log(drift)[..., 3:]
         n = len(buf["time"])
         return {
             "time": buf["time"],
@@ -479,8 +476,8 @@ class DoubleSupportSim:
             "sole_poses_world": homogeneous_to_pos_quat(soles),
             "pelvis_pose_world": homogeneous_to_pos_quat(pelvis),
             "sole_drift_m": np.linalg.norm(drift[..., :3, 3], axis=-1),
-            "sole_drift_rad": np.linalg.norm(Log(drift)[..., 3:], axis=-1),
-            "sole_turn_rad": np.abs(Log(drift)[..., 5]),  # of that, about the sole's normal (a twist on the floor)
+            "sole_drift_rad": np.linalg.norm(rotation, axis=-1),
+            "sole_turn_rad": np.abs(rotation[..., 2]),  # of that, about the sole's normal (a twist on the floor)
             "imu_true_acc": buf["imu_true_acc"],
             "imu_true_gyro": buf["imu_true_gyro"],
             **dict(zip(("pelvis_hold_error_m", "pelvis_strain_m", "pelvis_beyond_strain_m"),

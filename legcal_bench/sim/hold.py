@@ -109,6 +109,12 @@ class HoldReport:
                            f"the {side} sole tilted {np.rad2deg(tilt):.2f} deg {limit}")
         return out
 
+    @property
+    def soles_failed(self) -> bool:
+        """Whether a sole moved or rotated beyond its limit (a fall among them)."""
+        return (max(self.sole_move_m) > self.limits.sole_move_m
+                or max(self.sole_tilt_rad) > self.limits.sole_tilt_rad)
+
     @staticmethod
     def twisted(tilt: float, turn: float) -> bool:
         """Whether a sole's rotation is mostly a turn about its normal (a twist on the floor)."""

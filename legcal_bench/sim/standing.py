@@ -63,14 +63,13 @@ class CopRegulator:
 
     def __init__(self, model: mujoco.MjModel, scene, kin, physics_dt: float):
         legmap = kin.legmap
-        self.model = model
         self.every = max(1, int(round(CONTROL_PERIOD_S / physics_dt)))
         self.dt = self.every * physics_dt
         self.kp = np.asarray(scene.servo_kp, dtype=float)
-        self.weight = float(sum(model.body_mass)) * 9.81
-        adr = scene.sensor_adr
-        self.force_adr = np.array([np.arange(adr[f"{s}_force"], adr[f"{s}_force"] + 3) for s in SIDES])
-        self.torque_adr = np.array([np.arange(adr[f"{s}_torque"], adr[f"{s}_torque"] + 3) for s in SIDES])
+        self.min_load = MIN_LOAD_FRACTION * float(sum(model.body_mass)) * 9.81
+        adr = scene.sensor_adr  # each sensor's first value; force and torque are 3 each
+        self.force_adr = [adr[f"{s}_force"] for s in SIDES]
+        self.torque_adr = [adr[f"{s}_torque"] for s in SIDES]
         self.ft_site = np.array([int(model.sensor_objid[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SENSOR,
                                                                           f"legcal_{s}_force")]) for s in SIDES])
         self.sole_site = np.array([scene.sole_site[s] for s in SIDES])
@@ -78,12 +77,10 @@ class CopRegulator:
         self.legs = [list(range(n))[legmap.leg_slice(s)] for s in SIDES]
         self.ankles = [[c for c in cols if legmap.joint_roles[c] in ("ankle_pitch", "ankle_roll")] for cols in self.legs]
         self.kin = kin
-        # Each sole's support centre (its corners' centroid) in its frame (2, 3).
-        self.centre = np.array([np.mean(kin.corners[s], axis=0) for s in SIDES])
-        # m of centre of pressure per rad of ankle target, times the sole's load: kp / f_z.
+        # Each sole's support centre (its corners' centroid) in its frame.
+        self.centre = [tuple(float(v) for v in np.mean(kin.corners[s], axis=0)) for s in SIDES]
+        # The ankles' stiffness: kp / f_z is the centre of pressure's shift per rad of ankle target.
         self.ankle_kp = [float(np.mean(self.kp[cols])) for cols in self.ankles]
-        self.centre_list = [tuple(float(v) for v in c) for c in self.centre]
-        self.min_load = MIN_LOAD_FRACTION * self.weight
         self.u = np.zeros(n)
         self.tick = 0
         # (n, 10): both soles' rotation rates about x, y, then both soles' strain wrenches
@@ -114,8 +111,9 @@ class CopRegulator:
             # about the normal are asked for, the rest held at zero, and it maps back to
             # the leg's joints in least squares (a five-joint leg does what it can).
             compliance = (J / self.kp[cols]) @ J.T
-            shear_map[cols, 3 * k:3 * k + 3] = (np.linalg.pinv(asked @ J) @ asked @ compliance[:, [0, 1, 5]]
-                                                     / TIME_CONSTANT_S)
+            # The sensors' wrench turned into the floor's on the sole (SHEAR_SIGN).
+            shear_map[cols, 3 * k:3 * k + 3] = SHEAR_SIGN * (
+                np.linalg.pinv(asked @ J) @ asked @ compliance[:, [0, 1, 5]] / TIME_CONSTANT_S)
 
     def step(self, data: mujoco.MjData) -> np.ndarray:
         """Called once per physics step; returns the target corrections (n,)."""
@@ -133,7 +131,7 @@ class CopRegulator:
         for k in (0, 1):
             Rf, Rs = xmat[self.ft_site[k]].tolist(), xmat[self.sole_site[k]].tolist()
             o, at = xpos[self.sole_site[k]].tolist(), xpos[self.ft_site[k]].tolist()
-            a, b = self.force_adr[k, 0], self.torque_adr[k, 0]
+            a, b = self.force_adr[k], self.torque_adr[k]
             f, tau = _mv(Rf, sd[a:a + 3].tolist()), _mv(Rf, sd[b:b + 3].tolist())  # world frame
             r = (at[0] - o[0], at[1] - o[1], at[2] - o[2])  # carried from the sensor to the sole's origin
             tau = (tau[0] + r[1] * f[2] - r[2] * f[1], tau[1] + r[2] * f[0] - r[0] * f[2],
@@ -141,10 +139,10 @@ class CopRegulator:
             f_s, tau_s = _mtv(Rs, f), _mtv(Rs, tau)  # the sole's frame
             if abs(f_s[2]) < self.min_load:  # a sole too lightly loaded to say
                 return
-            cx, cy, cz = self.centre_list[k]
+            cx, cy, cz = self.centre[k]
             # The centre of pressure relative to the support centre, in the sole's frame.
             cop = (-tau_s[1] / f_s[2] - cx, tau_s[0] / f_s[2] - cy, -cz)
-            c = _mv(Rs, self.centre_list[k])
+            c = _mv(Rs, self.centre[k])
             c = (o[0] + c[0], o[1] + c[1], o[2] + c[2])  # the support centre in the world
             p = _mv(Rs, cop)
             soles.append((Rs, f, tau_s, abs(f_s[2]), cop, c, (c[0] + p[0], c[1] + p[1])))
@@ -175,7 +173,7 @@ class CopRegulator:
             # but for the body's small accelerations, taken out as their mean), and each
             # leg yields to what its sole feels (foot damping control).
             shear = _mtv(Rs, (f[0] - mx, f[1] - my, 0.0))
-            drive += [SHEAR_SIGN * shear[0], SHEAR_SIGN * shear[1], SHEAR_SIGN * tau_s[2]]
+            drive += [shear[0], shear[1], tau_s[2]]
         u = self.u + self.dt * (self.drive_map @ np.array(drive))
         np.clip(u, -MAX_CORRECTION_RAD, MAX_CORRECTION_RAD, out=self.u)
 

@@ -60,3 +60,22 @@ def test_a_fall_is_called_a_fall_not_a_twist_or_soft_servos():
         "the robot fell: the left sole moved 374 mm and turned 179 deg, the pelvis ended 340 mm from its commanded pose"]
     twisted = HoldReport(0.01, 0.0468, (0.0029, 0.0), (np.deg2rad(1.83), 0.0), sole_turn_rad=(np.deg2rad(1.83), 0.0))
     assert not twisted.fell and twisted.soles_twisted and "twisted on the floor" in twisted.failures()[1]
+
+
+def test_contact_holds_counts_a_failure_by_what_the_hold_check_found(monkeypatch):
+    """A set that fails is counted under the soles or the pelvis from the hold check's
+    report, not from the message's words (a twist or a fall reads differently)."""
+    import legcal_bench.protocol.collect as collect_module
+    from legcal_bench.errors import HoldError
+    from legcal_bench.reports import contact_holds
+    from legcal_bench.sim.hold import HoldReport
+
+    reports = {"twist": HoldReport(0.01, 0.0468, (0.0, 0.0), (np.deg2rad(1.8), 0.0), sole_turn_rad=(np.deg2rad(1.8), 0.0)),
+               "fold": HoldReport(0.3, 0.0468, (0.0, 0.0), (0.0, 0.0))}
+    for kind, report in reports.items():
+        def refuse(*args, **kwargs):
+            raise HoldError(f"segment stance_I: {'; '.join(report.failures())}", report)
+
+        monkeypatch.setattr(collect_module, "collect", refuse)
+        row = contact_holds.run_case("a3", "cop", 0)
+        assert not row["held"] and row["why"] == {"twist": "sole", "fold": "pelvis"}[kind], row
