@@ -231,8 +231,10 @@ def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains
              "the legs disagree (the offsets strain the closed chain) and twist a sole on the floor harder than "
              "friction holds it" if twisted else
              "the posture tips the robot onto a sole edge, or a sole slips" + (
-                 f"; legs without {', '.join(lacking)} cannot level a sole that the offsets of the joints above "
-                 "it tilt (the hip roll's tilts it by as much), so on a contact floor it stands on an edge"
+                 (f"; legs without {', '.join(lacking)} cannot level a sole that the offsets of the joints above "
+                  "it tilt (the hip roll's tilts it by as much), so on a contact floor it stands on an edge unless "
+                  "the standing controller (--standing cop) levels it with the hip roll" if sim.regulator is None else
+                  f"; legs without {', '.join(lacking)} level a sole with the hip roll, which moves it sideways too")
                  if lacking and sim.mode == "contact" else ""))
     fix = ("record this stance smaller (a protocol file with a smaller scale, --protocol) or leave it out "
            "(--stances); if the robot falls in every stance, give stiffer gains as servo_gains.<joint>: [kp, kd] "

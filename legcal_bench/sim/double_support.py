@@ -142,6 +142,7 @@ class DoubleSupportSim:
                                   "legs.right.ft in the leg map, or use standing_controller 'none'")
             self.regulator = CopRegulator(self.scene.model, self.scene, LegKinematics(self.sim_legmap),
                                           self.physics_dt)
+            self._plan_data = mujoco.MjData(self.scene.model)  # where the plan puts the centre of mass
         self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
         self.left = self.right = None
         self.standing = False
@@ -315,13 +316,23 @@ class DoubleSupportSim:
         self.time += self.dt
         return self.reachable
 
-    def _set_state(self, q_true: np.ndarray, T_WB: pin.SE3) -> None:
-        sc, d = self.scene, self.data
+    def _set_state(self, q_true: np.ndarray, T_WB: pin.SE3, data: mujoco.MjData | None = None) -> None:
+        sc, d = self.scene, self.data if data is None else data
         a = sc.free_qpos_adr
         d.qpos[a:a + 7] = se3_to_pos_quat(T_WB)
         d.qpos[sc.qpos_adr] = q_true
         for name, angle in self.sim_legmap.held_joints_rad.items():
             d.qpos[sc.model.jnt_qposadr[mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_JOINT, name)]] = angle
+
+    def _planned_com(self) -> tuple[float, float]:
+        """Where the plan puts the centre of mass on the floor (world x, y): the robot's
+        model with the pelvis at the posture and the commanded (nominal) joint angles,
+        as a real robot's controller computes it from its model."""
+        sc, d = self.scene, self._plan_data
+        self._set_state(self._q_cmd, posture_pose(self._posture), d)
+        mujoco.mj_kinematics(sc.model, d)
+        mujoco.mj_comPos(sc.model, d)
+        return float(d.subtree_com[0, 0]), float(d.subtree_com[0, 1])
 
     def _servo_target(self) -> np.ndarray:
         # Standing is the one phase with a physically imposed posture (legs straightened
@@ -362,14 +373,22 @@ class DoubleSupportSim:
         # over most of the settle time (smoothstep): a step would jolt the robot off its feet.
         self._target = self._servo_target()
         if self.regulator is not None:
-            self.regulator.reset(q_true)
+            # The straight-leg phase's targets are the true posture (`_servo_target`):
+            # no offset moves its centre of mass, so none is held.
+            self.regulator.hold_com = not self.standing
+            self.regulator.com_ref = self._planned_com()
+            self.regulator.reset(q_true, d.site_xmat[self._sole_sites].reshape(2, 3, 3))
         n = int(round(self.settle_s / self.physics_dt))
         s = np.minimum(1.0, np.arange(1, n + 1) / max(1, int(0.7 * n)))[:, None]
         self._drive(q_true + (s * s * (3 - 2 * s)) * (self._target - q_true))
+        if self.regulator is not None:  # the centre of mass is held while the targets blend in, then left
+            self.regulator.hold_com = False
 
     def _advance_physics(self) -> None:
         sc, d = self.scene, self.data
         start, end = self._target, self._servo_target()
+        if self.regulator is not None:
+            self.regulator.com_ref = self._planned_com()
         self._drive(start + (end - start) * self._substep_frac)  # linear over the logging period
         self._target = end
         self._q_true = d.qpos[sc.qpos_adr]
