@@ -387,8 +387,6 @@ class DoubleSupportSim:
     def _advance_physics(self) -> None:
         sc, d = self.scene, self.data
         start, end = self._target, self._servo_target()
-        if self.regulator is not None:
-            self.regulator.com_ref = self._planned_com()
         self._drive(start + (end - start) * self._substep_frac)  # linear over the logging period
         self._target = end
         self._q_true = d.qpos[sc.qpos_adr]

@@ -47,7 +47,7 @@ stabilizer, the legs then move the pelvis horizontally (each leg's least squares
 without the directions a straight knee cannot move) so that the whole robot's centre
 of pressure, low-passed (COP_FILTER_S), returns to the plan's centre of mass
 (`com_ref`: the posture with the commanded joint angles on the robot's model, which the
-simulator sets), with time constant COM_TIME_CONSTANT_S. The centre of pressure answers
+simulator sets at each stance's reset), with time constant COM_TIME_CONSTANT_S. The centre of pressure answers
 the pelvis's push at once and the other way (the ankles' torque, the body's
 acceleration), so the loop is slow: 1 s with a 0.3 s filter oscillated and tipped the
 A2-like robot in a squat, a 0.05 s filter at 2 s too; 3 s and 0.2 s held all four sets
