@@ -6,8 +6,8 @@ Position servos hold the targets the nominal model and the (offset) encoders giv
 real floor the offsets strain the closed chain and the posture's load moves between heel
 and toe, so each sole presses harder on one edge: it sinks unevenly into the floor
 (tilts) and, past a point, lifts that edge. At every control tick (500 Hz) the regulator
-reads each ankle sensor's wrench, carries it to the sole's origin and frame and takes the
-centre of pressure (p_x = -tau_y / f_z, p_y = tau_x / f_z; the sign of the sensor's
+reads each ankle sensor's wrench, carries it to the sole's origin and frame and takes
+the centre of pressure (p_x = -tau_y / f_z, p_y = tau_x / f_z; the sign of the sensor's
 convention cancels). What the centre of mass asks of the soles is kept: the part of the
 whole robot's centre of pressure off the line between the soles' support centres, which
 only the soles' moments can carry (each sole its share). The rest of each sole's offset
@@ -20,10 +20,11 @@ deviation settles with that time constant whatever the robot's gains and weight.
 sole rotation maps to the ankle joints (roles `ankle_pitch`, `ankle_roll`) through their
 columns of the sole Jacobian at the reset posture; a leg without ankle roll rolls its
 sole with the hip roll instead (which moves it sideways too, as the shear yield below
-allows): with pitch only, 20 of 50 five-joint sets rocked a sole past 1 deg. Two simpler laws fail: centring each sole's own centre of pressure is
-positive feedback through the body's lean (quasi-statically the ankle strategy inverts
-the sign), and keeping the load-weighted common part leaves the lateral edge loading the
-load split between the feet could carry.
+allows): with pitch only, 20 of 50 five-joint sets rocked a sole past 1 deg. Two simpler
+laws fail: centring each sole's own centre of pressure is positive feedback through the
+body's lean (quasi-statically the ankle strategy inverts the sign), and keeping the
+load-weighted common part leaves the lateral edge loading the load split between the
+feet could carry.
 
 The same strain pushes the soles sideways and twists them about their normals: standing
 still, the floor's horizontal forces on the two soles cancel (but for the body's small
@@ -39,23 +40,24 @@ that gives them, on a shorter leg the least squares that also holds tilt and hei
 (left free there, the knees drifted by 5 deg over a wide squat and rocked a sole).
 
 The same offsets move the pelvis, and with it the centre of mass: while the servo
-targets blend from the true posture to the offset ones (the settle of each stance),
-3-4 deg of offsets at an ankle or a knee carry it 50-100 mm from where the posture was
+targets blend from the true posture to the offset ones (the settle of each stance), 3-4
+deg of offsets at an ankle or a knee carry it 50-100 mm from where the posture was
 planned, which tipped a lunge's robot over a sole's edge (factory offsets plus
 `random:3`: 2-3 of 50 sets per built-in robot before this part). Like a real robot's
 stabilizer, the legs then move the pelvis horizontally (each leg's least squares,
-without the directions a straight knee cannot move) so that the whole robot's centre
-of pressure, low-passed (COP_FILTER_S), returns to the plan's centre of mass
-(`com_ref`: the posture with the commanded joint angles on the robot's model, which the
-simulator sets at each stance's reset), with time constant COM_TIME_CONSTANT_S. The centre of pressure answers
-the pelvis's push at once and the other way (the ankles' torque, the body's
-acceleration), so the loop is slow: 1 s with a 0.3 s filter oscillated and tipped the
-A2-like robot in a squat, a 0.05 s filter at 2 s too; 3 s and 0.2 s held all four sets
-that tried them (A2-like seeds 15, 34, 49, A3-like 38). The part acts during the settle only (`hold_com`) and its
-correction then stays: acting on through the recorded postures kept the body moving
-and cost the zero-noise contact floor 10-14 % (A3-like 0.0213 -> 0.0235 deg, G1 0.0256
--> 0.0292 deg, `legcal-bench contact-floor --cases 'contact zero'`); the straight-leg
-phase's targets are the true posture, so there it is off.
+without the directions a straight knee cannot move) so that the whole robot's centre of
+pressure, low-passed (COP_FILTER_S), returns to the plan's centre of mass (`com_ref`:
+the posture with the commanded joint angles on the robot's model, which the simulator
+sets at each stance's reset), with time constant COM_TIME_CONSTANT_S. The centre of
+pressure answers the pelvis's push at once and the other way (the ankles' torque, the
+body's acceleration), so the loop is slow: 1 s with a 0.3 s filter oscillated and tipped
+the A2-like robot in a squat, a 0.05 s filter at 2 s too; 3 s and 0.2 s held all four
+sets that tried them (A2-like seeds 15, 34, 49, A3-like 38). The part acts during the
+settle only (`hold_com`) and its correction then stays: acting on through the recorded
+postures kept the body moving and cost the zero-noise contact floor 10-14 % (A3-like
+0.0213 -> 0.0235 deg, G1 0.0256 -> 0.0292 deg, `legcal-bench contact-floor --cases
+'contact zero'`); the straight-leg phase's targets are the true posture, so there it is
+off.
 
 The corrections are capped (MAX_CORRECTION_RAD per joint): the cap stops a runaway, not
 the work, so it must exceed what the offsets ask of one joint, the sum over the joints
