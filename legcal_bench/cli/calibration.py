@@ -260,16 +260,38 @@ def cmd_excite(a: argparse.Namespace) -> int:
 def cmd_export(a: argparse.Namespace) -> int:
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.robots import load_robot
-    from legcal_bench.robots.export import fold_into_mjcf, write_offsets_yaml
+    from legcal_bench.robots.export import (FK_TOL, check_urdf_fold, fold_into_mjcf, fold_into_urdf,
+                                            write_offsets_yaml, write_ros2_params)
 
     result = CalibrationResult.load(a.result)
     legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot), a.mjcf)
-    path = write_offsets_yaml(a.out, legmap, result.offsets_rad, source=str(Path(a.result).resolve()))
+    if a.urdf_out:  # refused before anything is written
+        if legmap.urdf is None:
+            raise ConfigError(f"--urdf-out: robot {legmap.name} is described by an MJCF ({legmap.mjcf}), not a URDF "
+                              "(its leg map has no field 'urdf'" + (", and --mjcf replaces it" if a.mjcf else "")
+                              + "); use --mjcf-out NEW_FOLDER for a corrected copy of its MJCF")
+        if Path(a.urdf_out).exists():
+            raise ConfigError(f"--urdf-out {a.urdf_out} exists: give a new file name (an existing file is not "
+                              "replaced)")
+    if a.mjcf_out and Path(a.mjcf_out).exists():
+        raise ConfigError(f"--mjcf-out {a.mjcf_out} exists: give a new folder (the corrected model is written whole)")
+    source = str(Path(a.result).resolve())
+    path = write_offsets_yaml(a.out, legmap, result.offsets_rad, source=source)
     print(f"wrote {path}: {len(legmap.joint_names)} offsets of {legmap.name} in its joint names (q = q_enc + offset)")
+    if a.ros2_params:
+        path = write_ros2_params(a.ros2_params, legmap, result.offsets_rad, node=a.ros2_node, source=source)
+        print(f"wrote {path}: ROS 2 parameter file for node {a.ros2_node} (joint_names, offsets in rad; "
+              "q = q_enc + offset)")
     if a.mjcf_out:
         model = fold_into_mjcf(legmap, result.offsets_rad, a.mjcf_out)
         print(f"wrote {model}: {legmap.mjcf.name} with each leg joint's ref lowered by its offset, so the model fed "
               "raw encoder readings has the calibrated kinematics")
+    if a.urdf_out:
+        model = fold_into_urdf(legmap, result.offsets_rad, a.urdf_out)
+        err = check_urdf_fold(legmap, result.offsets_rad, model)  # measured again on the file as written
+        print(f"wrote {model}: {legmap.urdf.name} with each leg joint's origin folding its offset in and its limits "
+              f"moved by -offset; Pinocchio check, every frame at random encoder readings against the original at "
+              f"q_enc + offset: max difference {err:.2e} (tolerance {FK_TOL:g})")
     return 0
 
 
@@ -452,10 +474,22 @@ def add_commands(sub) -> None:
     xc.set_defaults(func=cmd_excite)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
-                                       "optionally a copy of its MJCF with the correction folded in")
-    ex.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out)")
+                                       "optionally a ROS 2 parameter file and a copy of its MJCF or URDF with the "
+                                       "correction folded in")
+    ex.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out); required")
     ex.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
-    ex.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names")
-    ex.add_argument("--out", default="offsets.yaml", help="offsets YAML (default offsets.yaml)")
-    ex.add_argument("--mjcf-out", default=None, help="new folder for the corrected MJCF and its assets")
+    ex.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names "
+                                                 "(default: the leg map's)")
+    ex.add_argument("--out", default="offsets.yaml", help="offsets YAML (default offsets.yaml; replaced if it exists)")
+    ex.add_argument("--mjcf-out", default=None, help="new folder for the corrected MJCF and its assets "
+                                                     "(default: none written)")
+    ex.add_argument("--ros2-params", default=None, metavar="PATH",
+                    help="also write a ROS 2 parameter file: <node>: ros__parameters: joint_names, offsets (rad), "
+                         "robot, units, convention (default: none written; replaced if it exists)")
+    ex.add_argument("--ros2-node", default="joint_offsets", metavar="NODE",
+                    help="node name the ROS 2 parameter file addresses, e.g. /ns/node or /** (default joint_offsets)")
+    ex.add_argument("--urdf-out", default=None, metavar="PATH",
+                    help="new file for a copy of the robot's URDF with each leg joint's origin folding its offset in "
+                         "and its limits moved, checked with Pinocchio before it is written; only for a robot whose "
+                         "leg map names a URDF (default: none written)")
     ex.set_defaults(func=cmd_export)
