@@ -80,7 +80,8 @@ def _convert(text: str, urdf: Path, where: str) -> str:
     actuators = mj.find("actuator")
     if actuators is None:
         actuators = ET.SubElement(mj, "actuator")
-    for joint in mj.iter("joint"):
+    # A body's joints only: MuJoCo writes a URDF <mimic> as an <equality><joint/> (no name).
+    for joint in (j for body in mj.iter("body") for j in body.findall("joint")):
         if joint.get("type", "hinge") in ("hinge", "slide"):
             motor = ET.SubElement(actuators, "motor", name=f"legcal_motor_{joint.get('name')}", joint=joint.get("name"))
             if joint.get("actuatorfrcrange") is not None:

@@ -85,3 +85,22 @@ def test_leg_map_mistakes_about_the_model_file_are_named(tmp_path):
         load_robot(str(_legmap(tmp_path / "site", imu={"site": "imu"})))
     with pytest.raises(LegMapError, match="is not a URDF .*root element is <mujoco>.*field 'mjcf'"):
         load_robot(str(_legmap(tmp_path / "mjcf", urdf=str(load_robot("a3").mjcf))))
+
+
+def test_a_urdf_with_a_mimic_joint_converts(tmp_path):
+    """MuJoCo writes a URDF <mimic> as an equality constraint, not a body's joint: it gets
+    no motor (it used to crash the conversion), and the model compiles."""
+    import mujoco
+
+    from legcal_bench.robots.urdf import mjcf_of_urdf
+
+    urdf = tmp_path / "robot" / "a3.urdf"
+    write_urdf_robot(A3, tmp_path / "robot")
+    urdf.write_text(urdf.read_text().replace("</robot>", (
+        '<link name="linkage"><inertial><origin xyz="0 0 0" rpy="0 0 0" /><mass value="0.1" />'
+        '<inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4" /></inertial></link>'
+        '<joint name="linkage_joint" type="revolute"><parent link="left_knee_link" /><child link="linkage" />'
+        '<origin xyz="0 0 -0.1" rpy="0 0 0" /><axis xyz="0 1 0" /><limit lower="-3" upper="3" effort="1" '
+        'velocity="1" /><mimic joint="left_knee_joint" multiplier="-0.5" offset="0.1" /></joint></robot>')))
+    model = mujoco.MjModel.from_xml_path(str(mjcf_of_urdf(urdf, "test")))
+    assert model.neq == 1 and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, "legcal_motor_linkage_joint") >= 0
