@@ -24,10 +24,13 @@ import numpy as np
 
 from legcal_bench.data.recording import Recording, training
 from legcal_bench.errors import CalibrationError
+from legcal_bench.estimation.checks.motion import resolve_motion
 from legcal_bench.estimation.imu.imu_motion import IMU_MODES
 from legcal_bench.estimation.problem.preprocess import PreprocessConfig
 from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.sim.sensors import SensorModel
 
 ENTRY_POINT_GROUP = "legcal_bench.calibrators"
 RESULT_FORMAT = "legcal-calibration-result"
@@ -120,8 +123,33 @@ def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[R
     """The one door through which the framework calls a calibrator (`calibrate`, `bench`,
     `sweep`, `walk-eval`, `diagnose`, the model-gap suite, the Python API): it gets the
     training recordings only (stances and standing, `training`); the held-out sessions
-    that score its result never reach it."""
-    return calibrator.calibrate(robot, training(recordings))
+    that score its result never reach it.
+
+    The declarations are settled here, before the calibrator reads them (issue #39):
+    each recording's motion is measured and resolved (`resolve_motion`: a declaration
+    the data contradict is replaced, with a warning; the evidence in
+    `diagnostics["motion"]`), and a result calibrated on recordings without a declared
+    sensor model says so in its warnings."""
+    recs = training(recordings)
+    evidence: dict = {}
+    recs, motion_warnings = resolve_motion(LegKinematics(robot), recs, evidence)
+    result = calibrator.calibrate(robot, recs)
+    result.warnings = [*result.warnings, *motion_warnings, *undeclared_sensor_warnings(recs)]
+    result.diagnostics.setdefault("motion", evidence)
+    return result
+
+
+def undeclared_sensor_warnings(recordings: list[Recording]) -> list[str]:
+    """The warning every result calibrated on recordings that declare no sensor model
+    (`"sensor_model": "unknown"`) carries: which ones, the conservative bounds applied,
+    and the fix."""
+    names = [r.name for r in recordings if not r.sensor_declared]
+    if not names:
+        return []
+    return [f"sensor model not declared in {len(names)} recording(s) ({', '.join(names)}): calibrated with "
+            f"conservative bounds ({SensorModel.unknown().describe()}; SI units), which widen the uncertainty and "
+            "the IMU-tilt bound; declare the sensors' datasheet values in the recordings' sensor_model "
+            "(docs/recording-format.md) for a calibration as tight as the sensors allow"]
 
 
 def number_option(name: str, value: Any, low: float | None = None, high: float | None = None, *,

@@ -5,6 +5,13 @@ session) holds what a real robot logs; the simulator's ground truth for that seg
 which calibrators never receive, sits beside it in `<name>.truth.npz`. A directory of
 segments (a "session set") has a `session.json` manifest. The schema is in
 docs/recording-format.md; `load_recording` validates everything it reads.
+
+Version 2 (issue #39) makes the declarations impossible to get silently wrong: the
+sensor model is complete (every field) or the string "unknown" (conservative bounds,
+`SensorModel.unknown()`, named in every result), and `motion` is optional: absent means
+not declared, and the motion is measured from the data before any estimator reads it
+(`legcal_bench.estimation.checks.motion.resolve_motion`). Version 1 files load with the
+same checks (this tool always wrote them with a complete model and a motion).
 """
 
 from __future__ import annotations
@@ -23,12 +30,14 @@ from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.sensors import SensorModel
 
 FORMAT = "legcal-recording"
-VERSION = 1
+VERSION = 2  # written; READ_VERSIONS are read
+READ_VERSIONS = (1, 2)
 KINDS = ("standing", "stance", "heldout")
 # What a calibrator may see: the stances and the straight-leg standing phase. Held-out
 # sessions score a result and never feed it (`training`).
 TRAINING_KINDS = ("standing", "stance")
 MOTIONS = ("continuous", "static")
+UNKNOWN = "unknown"  # meta "sensor_model": "unknown": not declared, conservative bounds applied
 MANIFEST = "session.json"
 
 
@@ -45,13 +54,37 @@ class Recording:
     q_enc: np.ndarray  # (N, n) rad, encoder angles in joint_names order (n leg joints)
     imu_acc: np.ndarray  # (N, 3) m/s^2, specific force in the IMU frame
     imu_gyro: np.ndarray  # (N, 3) rad/s, angular rate in the IMU frame
-    sensor_model: SensorModel = field(default_factory=SensorModel)
+    # The declared sensor model: the datasheet's (every field), or with
+    # sensor_declared=False the conservative `SensorModel.unknown()` (the default then).
+    sensor_model: SensorModel | None = None
     ft: np.ndarray | None = None  # (N, 2, 6) ankle [force, torque], left then right
     source: str = "robot"  # "robot", or "sim:<mode>" for simulated data
     session: str = ""
     # "continuous": logged while the posture moves (the accelerometer also reads the
-    # IMU's acceleration); "static": every frame logged at rest (it reads gravity alone).
-    motion: str = "continuous"
+    # IMU's acceleration); "static": every frame logged at rest (it reads gravity alone);
+    # None: not declared. Measured from the data either way (`resolve_motion`, which the
+    # framework runs before any estimator: `calibrate_training`, the scoring).
+    motion: str | None = None
+    # False: the team did not declare its sensors ("sensor_model": "unknown" on disk).
+    sensor_declared: bool = True
+
+    def __post_init__(self):
+        if self.sensor_model is None:
+            if self.sensor_declared:
+                raise RecordingError(
+                    f"{self.name}: no sensor_model: declare it from the datasheet (SensorModel with every field), "
+                    "or pass sensor_declared=False for conservative bounds (SensorModel.unknown(), named in every "
+                    "result)")
+            self.sensor_model = SensorModel.unknown()
+        elif not isinstance(self.sensor_model, SensorModel):
+            raise RecordingError(f"{self.name}: sensor_model must be a SensorModel, got {self.sensor_model!r}")
+        elif not self.sensor_declared and self.sensor_model != SensorModel.unknown():
+            raise RecordingError(
+                f"{self.name}: sensor_declared=False with a sensor model other than SensorModel.unknown(): an "
+                "undeclared model is the conservative bounds; declare the model (sensor_declared=True) or drop it")
+        if self.motion is not None and self.motion not in MOTIONS:
+            raise RecordingError(f"{self.name}: motion {self.motion!r}; use 'continuous', 'static' or None (not "
+                                 "declared: measured from the data)")
 
     @property
     def n_frames(self) -> int:
@@ -62,12 +95,15 @@ class Recording:
         return float((self.n_frames - 1) / (self.time[-1] - self.time[0])) if self.n_frames > 1 else 0.0
 
     def meta(self) -> dict:
-        return {
+        meta = {
             "format": FORMAT, "version": VERSION, "name": self.name, "kind": self.kind,
             "stance": self.stance, "robot": self.robot, "joint_names": list(self.joint_names),
-            "sensor_model": self.sensor_model.to_dict(), "source": self.source, "session": self.session,
-            "motion": self.motion,
+            "sensor_model": self.sensor_model.to_dict() if self.sensor_declared else UNKNOWN,
+            "source": self.source, "session": self.session,
         }
+        if self.motion is not None:
+            meta["motion"] = self.motion
+        return meta
 
     def save(self, path: str | Path) -> Path:
         arrays = {"time": self.time, "q_enc": self.q_enc, "imu_acc": self.imu_acc, "imu_gyro": self.imu_gyro}
@@ -132,19 +168,22 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
     if not isinstance(meta["joint_names"], list) or not all(isinstance(n, str) for n in meta["joint_names"]):
         raise RecordingError(f"{where}: field 'joint_names' must be a list of the robot's leg joint names (strings), "
                              f"got {meta['joint_names']!r}")
-    if not isinstance(meta["sensor_model"], dict):
-        raise RecordingError(f"{where}: field 'sensor_model' must be a JSON object of sensor-model fields "
-                             f"(see docs/recording-format.md), got {meta['sensor_model']!r}")
+    if not isinstance(meta["sensor_model"], dict) and meta["sensor_model"] != UNKNOWN:
+        raise RecordingError(f"{where}: field 'sensor_model' must be a JSON object of sensor-model fields, every "
+                             f"one declared from the datasheet, or the string \"unknown\" (conservative bounds; see "
+                             f"docs/recording-format.md), got {meta['sensor_model']!r}")
     if meta["format"] != FORMAT:
         raise RecordingError(f"{where}: field 'format' is {meta['format']!r}, expected {FORMAT!r}")
-    if meta["version"] != VERSION:
-        raise RecordingError(f"{where}: format version {meta['version']} is not supported (this reader: {VERSION})")
+    if isinstance(meta["version"], bool) or meta["version"] not in READ_VERSIONS:
+        raise RecordingError(f"{where}: format version {meta['version']} is not supported (this reader: "
+                             f"{', '.join(map(str, READ_VERSIONS))})")
     for key in ("source", "session"):
         if key in meta and not isinstance(meta[key], str):
             raise RecordingError(f"{where}: metadata field '{key}' must be a string, got {meta[key]!r}")
-    if meta.get("motion", "continuous") not in MOTIONS:
+    if meta.get("motion") is not None and meta["motion"] not in MOTIONS:
         raise RecordingError(f"{where}: field 'motion' is {meta['motion']!r}; use 'continuous' (logged while the "
-                             "posture moves) or 'static' (every frame logged at rest)")
+                             "posture moves) or 'static' (every frame logged at rest), or leave it out (measured "
+                             "from the data)")
     if meta["kind"] not in KINDS:
         raise RecordingError(f"{where}: field 'kind' is {meta['kind']!r}; use one of {KINDS}")
     names = list(meta["joint_names"])
@@ -234,8 +273,9 @@ def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Re
     path = Path(path)
     arrays, meta = _read_npz(path)
     validate(arrays, meta, str(path), joint_names)
+    declared = meta["sensor_model"] != UNKNOWN
     try:
-        sensor = SensorModel.from_dict(meta["sensor_model"])
+        sensor = SensorModel.from_dict(meta["sensor_model"]) if declared else SensorModel.unknown()
     except (TypeError, ValueError, LegcalError) as e:
         raise RecordingError(f"{path}: field 'sensor_model' is invalid ({e})") from None
     return Recording(
@@ -245,7 +285,7 @@ def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Re
         imu_acc=arrays["imu_acc"].astype(float), imu_gyro=arrays["imu_gyro"].astype(float),
         sensor_model=sensor, ft=arrays["ft"].astype(float) if "ft" in arrays else None,
         source=meta.get("source", "robot"), session=meta.get("session", ""),
-        motion=meta.get("motion", "continuous"),
+        motion=meta.get("motion"), sensor_declared=declared,
     )
 
 
@@ -265,12 +305,16 @@ def write_manifest(out_dir: str | Path, manifest: dict) -> Path:
     return atomic_write_json(Path(out_dir) / MANIFEST, {"format": FORMAT + "-session", "version": VERSION, **manifest})
 
 
+# Beside the recordings: the manifest, and the timeline plot of an imported log.
+SESSION_FILES = (MANIFEST, "timeline.png")
+
+
 def is_session_dir(directory: str | Path) -> bool:
     """True for a folder that holds only a session set (recordings, their ground truth,
-    a manifest): one that a new collection may replace."""
+    a manifest, an import's timeline plot): one that a new collection or import may replace."""
     directory = Path(directory)
     return directory.is_dir() and all(
-        p.is_file() and (p.name == MANIFEST or p.suffix == ".npz") for p in directory.iterdir())
+        p.is_file() and (p.name in SESSION_FILES or p.suffix == ".npz") for p in directory.iterdir())
 
 
 def list_segments(directory: str | Path, allow_partial: bool = False) -> list[Path]:

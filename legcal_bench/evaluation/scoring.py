@@ -14,6 +14,8 @@ heldout: on the held-out recordings, before (dq = 0) and after (dq_hat) correcti
     and the same two on the simulator's true held-out postures (`*_true_*`: true
     joint angles minus the injected offsets, true gravity direction, no noise), which
     separate methods that the noisy version cannot (it sits at the sensor floor).
+    The held-out recordings' motion is measured and resolved first (`resolve_motion`);
+    `heldout.warnings` holds what it found against a declaration.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ import numpy as np
 from legcal_bench.calibrators.base import CalibrationResult
 from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import CalibrationError, RecordingError
+from legcal_bench.estimation.checks.motion import resolve_motion
 from legcal_bench.estimation.imu.imu_motion import compensate
 from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.estimation.problem.residuals import flat_ground_errors
@@ -133,8 +136,10 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
     held = [p for p in paths if load_recording(p, names).kind == "heldout"]
     if held:
         h0, h1, n0, n1, ht0, ht1, nt0, nt1 = ([] for _ in range(8))
+        motion_warnings: list[str] = []
         for p in held:
-            rec = load_recording(p, names)
+            (rec,), found = resolve_motion(kin, [load_recording(p, names)])
+            motion_warnings += found
             acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
             up = up_in_base(acc, R_BI)
             for store_h, store_n, corr in ((h0, n0, 0.0), (h1, n1, dq)):
@@ -157,6 +162,8 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
                                     "after": float(np.rad2deg(rms(cat(n1))))},
             "foot_height_residuals_mm": {"before": (cat(h0) * 1e3).tolist(), "after": (cat(h1) * 1e3).tolist()},
         }
+        if motion_warnings:
+            out["heldout"]["warnings"] = motion_warnings
         if ht0:
             out["heldout"]["foot_height_rms_true_mm"] = {"before": rms(cat(ht0)) * 1e3, "after": rms(cat(ht1)) * 1e3}
             out["heldout"]["sole_normal_rms_true_deg"] = {"before": float(np.rad2deg(rms(cat(nt0)))),
@@ -189,6 +196,7 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
             up = np.array([pos_quat_to_se3(x).rotation.T @ [0, 0, 1.0] for x in t.pelvis_pose_world])
             kinds.add("true")
         else:
+            (rec,), _ = resolve_motion(kin, [rec])  # its warnings are `score`'s (heldout.warnings)
             acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
             q, up = rec.q_enc, up_in_base(acc, kin.R_BI)
             kinds.add("logged")

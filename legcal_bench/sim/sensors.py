@@ -6,6 +6,11 @@ from datasheets and their own characterization (noise levels, encoder resolution
 no real log could know. `ImuErrors` holds the realized bias and mounting tilt; they live
 in the simulator (`SimSensors`) and in the ground truth only.
 
+A declaration read from user data (`SensorModel.from_dict`: a recording, a sensor spec)
+must give every field: a field left out is not a perfect sensor but an undeclared one.
+A team that does not know its sensors writes `unknown` instead: `SensorModel.unknown()`,
+conservative bounds that every calibration result then names (issue #39).
+
 Encoders: Gaussian noise, then quantization to the encoder resolution. IMU: the true
 specific force and angular rate in the nominal IMU frame, rotated into the actual
 (mounting-tilted) sensor frame, plus the realized constant bias and Gaussian noise.
@@ -86,7 +91,11 @@ class SensorModel:
         return self.imu_mount_bound + self.accel_bias_bound / G
 
     @classmethod
-    def from_dict(cls, d: dict) -> "SensorModel":
+    def from_dict(cls, d: dict, complete: bool = True) -> "SensorModel":
+        """The declaration in `d`, checked. With `complete` (the default: a declaration
+        from user data) every field must be there: a missing one is an error naming it,
+        never a silent 0 (a perfect sensor). `complete=False` fills missing fields with
+        0, for code that builds a model from a few known fields on purpose."""
         if isinstance(d, dict):
             realized = sorted(set(d) & set(REALIZED_FIELDS))
             if realized:
@@ -94,7 +103,56 @@ class SensorModel:
                     f"sensor model: fields {realized} are realized values (the IMU's actual bias or mounting tilt) "
                     f"that a robot's log cannot know; declare bounds instead ({', '.join(REALIZED_FIELDS[k] for k in realized)}). "
                     "Recordings collected before issue #11 carry them: re-collect them")
-        return cls(**_numbers(cls, d, "sensor model"))
+        values = _numbers(cls, d, "sensor model")
+        missing = [f.name for f in fields(cls) if f.name not in values]
+        if complete and missing:
+            raise SensorModelError(
+                f"sensor model: missing fields {missing}: a field left out would read as a perfect sensor (0); "
+                "declare it from the datasheet (0 only if the sensor truly has none), or write "
+                "\"sensor_model\": \"unknown\" (conservative bounds, named in every result; "
+                "docs/recording-format.md)")
+        return cls(**values)
+
+    @classmethod
+    def unknown(cls) -> "SensorModel":
+        """The model applied when a recording declares `"sensor_model": "unknown"`:
+        `UNKNOWN_SENSORS`, conservative bounds (see there)."""
+        return UNKNOWN_SENSORS
+
+    def describe(self) -> str:
+        """The fields as 'name value' pairs, for messages."""
+        return ", ".join(f"{k} {v:g}" for k, v in self.to_dict().items())
+
+
+# What a recording that declares `"sensor_model": "unknown"` is calibrated with: bounds
+# larger than any plausible humanoid's sensors, so the posterior, the contact check and
+# the IMU-tilt warning err on the safe side (wider uncertainty, fewer soles flagged, the
+# tilt warning on). Every calibration result names the recordings that use them.
+UNKNOWN_SENSORS = SensorModel(
+    # 1 mrad (0.057 deg): 10x a 17-bit absolute encoder's electrical noise (1e-4 rad), and
+    # above a 12-bit magnetic encoder's quantization (2 pi / 2^12 / sqrt(12) = 0.44 mrad).
+    encoder_noise_std=1e-3,
+    # Quantization is folded into encoder_noise_std above (0 = none declared separately).
+    encoder_resolution=0.0,
+    # 0.05 m/s^2 (5 mg) per sample: a consumer MEMS accelerometer (~400 ug/sqrt(Hz), e.g.
+    # MPU-6050) at ~100 Hz bandwidth reads ~4 mg; industrial parts read well under 1 mg.
+    accel_noise_std=0.05,
+    # 0.01 rad/s (0.57 deg/s) per sample: ~10x a consumer MEMS gyro at 100 Hz bandwidth
+    # (0.005 deg/s/sqrt(Hz) -> 0.05 deg/s), room for a leg's vibration.
+    gyro_noise_std=0.01,
+    # 5 N, 0.5 N m: above six-axis ankle force/torque sensors' noise (0.5-2 N, 0.05-0.2 N m)
+    # with a strain gauge's drift over a segment.
+    ft_force_noise_std=5.0,
+    ft_torque_noise_std=0.5,
+    # 0.2 m/s^2 (~20 mg) per axis: a trimmed MEMS accelerometer's zero-g offset over
+    # temperature (BMI088, ICM-42688: +-20 mg); a factory-calibrated IMU module reads < 5 mg.
+    accel_bias_bound=0.2,
+    # 0.05 rad/s (~3 deg/s) per axis: a trimmed MEMS gyro's zero-rate offset (+-1-3 deg/s).
+    gyro_bias_bound=0.05,
+    # 1 deg: an IMU board screwed into a machined bracket, without an IMU calibration
+    # (drawing tolerances give 0.1-0.5 deg).
+    imu_mount_bound=float(np.deg2rad(1.0)),
+)
 
 
 @dataclass(frozen=True)

@@ -123,7 +123,7 @@ def test_sensor_model_fields_are_checked(field, value):
     (dict(meta=lambda m: m.pop("kind")), r"missing metadata field 'kind'"),
     (dict(meta=lambda m: m.update(kind="walking")), r"field 'kind' is 'walking'; use one of"),
     (dict(meta=lambda m: m.update(format="rosbag")), r"field 'format' is 'rosbag'"),
-    (dict(meta=lambda m: m.update(version=2)), r"format version 2 is not supported"),
+    (dict(meta=lambda m: m.update(version=3)), r"format version 3 is not supported"),
     (dict(meta=lambda m: m.update(joint_names=m["joint_names"][:11])), r"must list the robot's leg joints, left leg "
                                                                         r"then right \(the same number per leg\), got 11"),
     (dict(meta=lambda m: m.update(name=["stance"])), r"metadata field 'name' must be a string"),
