@@ -24,7 +24,7 @@ if platform.machine().lower() in ("x86_64", "amd64"):
 
 # The API's names, loaded on first access (PEP 562); `__version__` too, as reading the
 # installed metadata (importlib.metadata) costs the command's start-up tens of ms.
-_API = ("collect", "load", "calibrate", "score", "diagnose", "walk", "walk_eval")
+_API = ("collect", "import_log", "load", "calibrate", "score", "diagnose", "walk", "walk_eval")
 
 
 def __getattr__(name: str):

@@ -56,3 +56,8 @@ class HoldError(LegcalError):
     def __init__(self, message: str, report=None):
         super().__init__(message)
         self.report = report
+
+
+class LogImportError(LegcalError):
+    """A robot log or its mapping file that cannot be imported; the message names the
+    mapping field (or the log, topic, column) and the fix."""

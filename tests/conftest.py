@@ -149,3 +149,13 @@ def in_process_cells(monkeypatch):
             return done
 
     monkeypatch.setattr(runner, "make_executor", lambda scheduler, workers: (InProcess(), None))
+
+
+@pytest.fixture(scope="session")
+def long_log():
+    """The simulated long robot log of the A3-like robot (standing, stances I-IV, walking,
+    stepping in place, standing; ~15 s to make): built once per test process. Modules
+    using it share the xdist group "long_log", so one process builds it."""
+    from legcal_bench.evaluation.long_log import simulate_long_log
+
+    return simulate_long_log("a3", seed=0)

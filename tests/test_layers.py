@@ -19,6 +19,8 @@ LAYERS = [
     ("data", ("legcal_bench.data",)),
     ("protocol", ("legcal_bench.protocol",)),
     ("estimation", ("legcal_bench.estimation",)),
+    # Robot logs in: read, align, detect, write recordings (uses kinematics and the data format).
+    ("logs", ("legcal_bench.logs",)),
     ("calibrators", ("legcal_bench.calibrators",)),
     # A policy is observation -> action (spec, network, runner): the walking env takes
     # its spec for the servos; rollouts live in evaluation.

@@ -5,6 +5,7 @@ the object the matching command writes. `import legcal_bench` stays light: these
     import legcal_bench as lb
 
     lb.collect("runs/api/set", robot="a3", sensors="realistic", seed=0)  # legcal-bench collect
+    lb.import_log(["robot.mcap"], "mapping.yaml", "runs/api/log", robot="my_robot.legmap.yaml")  # import
     result = lb.calibrate("runs/api/set", robot="a3")                    # legcal-bench calibrate
     result.save("runs/api/result.json")
     scores = lb.score("runs/api/set", result)                            # legcal-bench score --json
@@ -28,7 +29,7 @@ from legcal_bench.data.recording import Recording, load_session
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import LegMap
 
-__all__ = ["collect", "load", "calibrate", "score", "diagnose", "walk", "walk_eval"]
+__all__ = ["collect", "import_log", "load", "calibrate", "score", "diagnose", "walk", "walk_eval"]
 
 
 def _robot(robot) -> LegMap:
@@ -42,6 +43,17 @@ def collect(out: str | Path, robot: str = "a3", **config):
     from legcal_bench.protocol.collect import CollectConfig, collect as _collect
 
     return _collect(CollectConfig(robot=robot, **config), out, progress=False)
+
+
+def import_log(logs: list[str | Path], mapping: str | Path, out: str | Path, robot: str | LegMap = "a3",
+               heldout: list[str] | None = None, ranges: list[tuple[float, float]] | None = None, plot: bool = True):
+    """A robot's log (bags or tables) through its mapping file into the session folder
+    `out` (`legcal-bench import`): the static double-support segments found (or the given
+    `ranges`, seconds from the log's start), `heldout` segment names kept out of training.
+    Returns the `ImportSummary` (segments, timeline intervals, streams, gaps, warnings)."""
+    from legcal_bench.logs.importer import import_log as _import_log
+
+    return _import_log(logs, mapping, _robot(robot), out, heldout=heldout, ranges=ranges, plot=plot)
 
 
 def load(bags: str | Path, robot: str | LegMap = "a3", allow_partial: bool = False) -> list[Recording]:

@@ -19,10 +19,10 @@ import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from legcal_bench.cli import benchmark, calibration, data, reports, robots, walking  # noqa: E402
+from legcal_bench.cli import benchmark, calibration, data, logs, reports, robots, walking  # noqa: E402
 from legcal_bench.errors import LegcalError  # noqa: E402
 
-GROUPS = (data, robots, calibration, walking, benchmark, reports)
+GROUPS = (data, logs, robots, calibration, walking, benchmark, reports)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -9,11 +9,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from legcal_bench.evaluation.long_log import simulate_long_log
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
 
-pytestmark = pytest.mark.xdist_group("long_log")  # one process simulates the log for all
+pytestmark = pytest.mark.xdist_group("long_log")  # one process simulates the log (tests/conftest.py) for all
 
 STATIC = ("standing", "stance_I", "stance_II", "stance_III", "stance_IV")
 ORDER = ["standing", "transition", "stance_I", "transition", "stance_II", "transition", "stance_III", "transition",
@@ -21,8 +20,8 @@ ORDER = ["standing", "transition", "stance_I", "transition", "stance_II", "trans
 
 
 @pytest.fixture(scope="module")
-def log():
-    return simulate_long_log("a3", seed=0)
+def log(long_log):
+    return long_log
 
 
 @pytest.fixture(scope="module")
