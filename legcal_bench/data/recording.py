@@ -105,12 +105,21 @@ class Recording:
             meta["motion"] = self.motion
         return meta
 
-    def save(self, path: str | Path) -> Path:
+    def save(self, path: str | Path, version: int = VERSION) -> Path:
+        """Write the recording (validated first). `version=1`: the previous format, for a
+        reader of it (`bench-speed`'s baseline); only a recording that declares its
+        sensor model and motion has one."""
         arrays = {"time": self.time, "q_enc": self.q_enc, "imu_acc": self.imu_acc, "imu_gyro": self.imu_gyro}
         if self.ft is not None:
             arrays["ft"] = self.ft
-        validate(arrays, self.meta(), str(path))
-        return _save_npz(path, arrays, self.meta())
+        meta = self.meta()
+        if version != VERSION:
+            if version != 1 or not self.sensor_declared or self.motion is None:
+                raise RecordingError(f"{path}: version {version} cannot hold this recording (version 1 needs a "
+                                     "declared sensor model and motion)")
+            meta["version"] = version
+        validate(arrays, meta, str(path))
+        return _save_npz(path, arrays, meta)
 
 
 @dataclass

@@ -2,9 +2,10 @@
 
 Read (through the mapping file) → align onto one clock → find the static
 double-support segments (or take the user's time ranges) → one recording per segment,
-with the declared sensor model (or `unknown`) and the motion as declared (measured and
-checked when the recordings are calibrated) → the session folder, written whole, with
-the import's timeline in its manifest and a timeline plot.
+with the declared sensor model (or `unknown`) and the motion as declared (measured here
+for the summary, and again, as for any recording, when they are calibrated) → the
+session folder, written whole, with the import's timeline in its manifest and a
+timeline plot.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from legcal_bench.data.recording import SESSION_FILES, Recording, is_session_dir, write_manifest
 from legcal_bench.errors import LogImportError
+from legcal_bench.estimation.checks.motion import resolve_motion
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.logs.align import align
 from legcal_bench.logs.detect import REASONS, Detected, detect
@@ -103,6 +105,14 @@ def import_log(logs: list[str | Path], map_path: str | Path, legmap: LegMap, out
         ft=None if aligned.ft is None else aligned.ft[s.start:s.stop].copy(), sensor_model=sensor,
         sensor_declared=mapping.sensor_declared, source="robot", session=logs[0].stem, motion=mapping.motion,
     ) for s in found.segments]
+    # The motion as the data show it (calibration measures it again, as for any recording):
+    # a declaration the data contradict is named now, before anything is calibrated.
+    evidence: dict = {}
+    _, motion_warnings = resolve_motion(kin, recordings, evidence)
+    for seg in summary.segments:
+        seg["motion"] = evidence[seg["name"]]["motion"]
+    summary.warnings += motion_warnings
+    warnings = summary.warnings
     manifest = {
         "robot": legmap.name, "mode": "robot", "files": [f"{r.name}.npz" for r in recordings],
         "import": {"logs": [str(p.resolve()) for p in logs], "mapping": str(Path(map_path).resolve()),

@@ -53,7 +53,8 @@ def format_timeline(summary) -> str:
     for s in summary.segments:
         lines.append(f"  {s['name']:<14} {s['kind']:<9} {s['stance']:<9} {s['t0']:7.2f}-{s['t1']:7.2f} s "
                      f"{s['frames']:>6} frames  pelvis moves {s['posture_range_m'] * 1e3:5.1f} mm / "
-                     f"{np.rad2deg(s['posture_range_rad']):4.1f} deg  ({s['found_by']})")
+                     f"{np.rad2deg(s['posture_range_rad']):4.1f} deg  motion {s.get('motion') or 'unclear'}  "
+                     f"({s['found_by']})")
     for w in summary.warnings:
         lines.append(f"warning: {w}")
     return "\n".join(lines)

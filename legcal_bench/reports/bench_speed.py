@@ -222,6 +222,7 @@ class Partial:
 def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = None, rounds: int = 2,
                     baseline: str = BASELINE, groups=DEFAULT_GROUPS, progress: bool = True) -> str:
     from legcal_bench.files.reports import write_report
+    from legcal_bench.data.recording import list_segments, load_recording
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.provenance import code_version, describe
 
@@ -246,6 +247,8 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
         data = tmp / "data"
         if "calibration" in groups:
             collect(CollectConfig(robot=robot, mode="weld", sensors="realistic"), data, progress=False)
+            for path in list_segments(data):  # the format both read (a baseline before #39 reads version 1)
+                load_recording(path).save(path, version=1)
         site, src = (None, None) if baseline == "none" else install_baseline(baseline, tmp / "baseline")
         for k in range(rounds):
             for group in groups:

@@ -213,3 +213,24 @@ def test_the_docs_table_lists_the_unknown_bounds():
         assert row, field
         assert f"{value:g}" in row.group(1) or (field == "imu_mount_bound" and "0.01745" in row.group(1)), row.group(1)
     assert SENSOR_PRESETS["realistic"].model.accel_bias_bound < UNKNOWN_SENSORS.accel_bias_bound
+
+
+def test_a_declared_recording_saves_as_version_1_for_an_older_reader(tmp_path):
+    """bench-speed's baseline (before #39) reads version 1: a recording that declares its
+    sensors and motion writes it; one that does not is refused, not written half-true."""
+    from legcal_bench.data.recording import Recording, load_recording
+    from legcal_bench.sim.sensors import SENSOR_PRESETS
+
+    n = 50
+    rec = Recording(name="stance_I", kind="stance", stance="I", robot="a3",
+                    joint_names=load_robot("a3").joint_names, time=np.arange(n) * 0.02, q_enc=np.zeros((n, 12)),
+                    imu_acc=np.tile([0.0, 0.0, 9.81], (n, 1)), imu_gyro=np.zeros((n, 3)),
+                    sensor_model=SENSOR_PRESETS["realistic"].model, motion="static")
+    rec.save(tmp_path / "v1.npz", version=1)
+    with np.load(tmp_path / "v1.npz") as z:
+        assert json.loads(str(z["meta"]))["version"] == 1
+    assert load_recording(tmp_path / "v1.npz").motion == "static"
+    for bad in (dict(motion=None), dict(sensor_model=None, sensor_declared=False)):
+        with pytest.raises(RecordingError, match="version 1"):
+            Recording(**{**rec.__dict__, **bad}).save(tmp_path / "bad.npz", version=1)
+    assert not (tmp_path / "bad.npz").exists()

@@ -341,3 +341,20 @@ def test_a_gap_longer_than_the_tolerance_splits_a_segment_and_is_reported(small_
     assert len(inside) == 2 and inside[0]["t1"] < mid - 0.15 and inside[1]["t0"] > mid + 0.15 - 1e-6
     assert [g["stream"] for g in s.gaps] == ["imu"] and 0.3 - 1e-6 <= s.gaps[0]["seconds"] <= 0.32 + 1e-6
     assert sum("'imu' has a gap" in w for w in s.warnings) == 1
+
+
+def test_a_motion_declaration_the_data_contradict_is_named_at_import(small_log, legmap, tmp_path):
+    """The small log is hold-and-log (the simulator's kinematic mode): declared continuous,
+    the import measures static in every stance and says so."""
+    out, doc, _ = small_log
+    recs = load_session(out / "set", robot=legmap)
+    spans = as_log(recs, legmap)[3]
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump({**doc, "motion": "continuous"}))
+    s = import_log([out / "bag"], tmp_path / "map.yaml", legmap, tmp_path / "session", ranges=spans, plot=False)
+    stances = [g for g in s.segments if g["kind"] == "stance"]
+    assert [g["motion"] for g in stances] == ["static"] * 4
+    assert sum("declared 'continuous', the data show 'static'" in w for w in s.warnings) == 4
+    (tmp_path / "map.yaml").write_text(yaml.safe_dump(doc))  # undeclared: measured, no alarm
+    s = import_log([out / "bag"], tmp_path / "map.yaml", legmap, tmp_path / "session", ranges=spans, plot=False)
+    assert [g["motion"] for g in s.segments if g["kind"] == "stance"] == ["static"] * 4
+    assert not any("motion" in w for w in s.warnings)
