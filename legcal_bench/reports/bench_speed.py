@@ -72,6 +72,8 @@ def _at_least(limit: float):
 TARGETS = {
     "interfoot_end_to_end_sensor": ("inter-foot calibrate end to end, setting sensor (the default), s", _at_most(0.15)),
     "interfoot_end_to_end": ("inter-foot calibrate end to end, the default setting (operating before #35), s", None),
+    "interfoot_door": ("inter-foot through `calibrate_training`, the framework's door (wall; the motion resolved "
+                       "from #39), s", None),
     "interfoot_end_to_end_operating": ("inter-foot calibrate end to end, setting operating, s", None),
     "interfoot_solve": ("inter-foot solve, sensor, 4 x 450 frames, s", None),
     "interfoot_solve_2point": ("inter-foot solve, sensor, forward-difference Jacobian, s", None),

@@ -62,6 +62,21 @@ def probe(data: str, robot: str, repeats: int, collect_repeats: int, only: str |
                               "offsets": [runs[0].offsets_rad[n] for n in lm.joint_names]}
         if key == "total":  # each stage of the calibrator's own timing (`timing_s`)
             out["cases"][name]["stages"] = {k: [r.timing_s[k] for r in runs] for k in runs[0].timing_s}
+    # The framework's one door (`calibrate_training`: the default inter-foot calibrator, wall
+    # time): what it adds around the calibrator (from #39, the motion measured and resolved).
+    if only != "collection":
+        try:
+            from legcal_bench.calibrators.base import calibrate_training
+        except ImportError:  # a baseline before the door existed
+            calibrate_training = None
+        if calibrate_training is not None:
+            walls = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                r = calibrate_training(get_calibrator("interfoot"), lm, recs)
+                walls.append(time.perf_counter() - t0)
+            out["cases"]["interfoot_door"] = {"unit": "s", "values": walls,
+                                              "offsets": [r.offsets_rad[n] for n in lm.joint_names]}
     # Contact: the default collection there, with the standing controller where the robot
     # has ankle force/torque sensors (from issue #38 on; before, the servos alone).
     for mode in ("kinematic", "weld", "contact") if only != "calibration" else ():
