@@ -45,12 +45,9 @@ an inconclusive one keeps it, and an undeclared recording is taken as "continuou
 predicted acceleration is not, `QUIET`).
 
 The comparisons use the frames where the smoothing has its full window (its ends are
-noisier). Measured on A3 sets (12 s stances at 50 Hz, presets realistic and zero;
-docs/recording-format.md): kinematic mode dchi2 -214 to -3573 with k -0.04 to 0.04,
-weld and contact +277 to +5779 with k 0.94 to 1.10, standing phases |dchi2| < 3; a2 and
-the G1 alike, contact stances of 4 s read k up to 1.4 (the soles rock: more than
-predicted, never "static"). Cost: ~10 ms per 12 s stance (two batched forward-
-kinematics passes, two smoothings, one 1800 x 21 SVD).
+noisier). The margins measured on the default sets, and the command that gives them, are
+in docs/recording-format.md ("Motion: measured from the data"). Work per recording: two
+batched forward-kinematics passes, two smoothings, one SVD of (frames x 21).
 """
 
 from __future__ import annotations
