@@ -145,7 +145,7 @@ class WalkingEnv(MujocoEnv):
         self.offsets = resolve_offsets(offsets, self.legmap, np.random.default_rng(offset_seed))
         self.correction = _correction(correction, "correction", self.legmap)
         m, sc = self.sim.model, self.sim.scene
-        jnt = m.dof_jntid[sc.dof_adr]
+        jnt = m.dof_jntid[self.sim.body_dof]  # the leg joints, then a whole-body policy's others
         low = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 0] - 0.5, -np.pi)
         high = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 1] + 0.5, np.pi)
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float64)
@@ -155,6 +155,9 @@ class WalkingEnv(MujocoEnv):
                "imu_gyro": box(3)}
         if sc.has_ft:
             obs["ft"] = box(2, 6)
+        if walking.extra_joints:
+            obs["q_extra"] = box(len(walking.extra_joints))
+            obs["dq_extra"] = box(len(walking.extra_joints))
         self.observation_space = spaces.Dict(obs)
         self._counts = {"left": 0, "right": 0}
 
@@ -177,7 +180,7 @@ class WalkingEnv(MujocoEnv):
     def advance(self, action) -> dict:
         """`step` without its info dict (the truth, from `sim`, when asked): the
         observation. For a caller that reads the truth itself (`evaluation.walk`)."""
-        self.sim.step(np.asarray(action, dtype=np.float64).reshape(self.legmap.n_joints))
+        self.sim.step(np.asarray(action, dtype=np.float64).reshape(self.sim.config.body_joints))
         return self._observe()
 
     def _observe(self) -> dict:
@@ -195,7 +198,8 @@ class WalkingEnv(MujocoEnv):
                 new.append((side, times[k], sim.strikes.position[side][k]))
             self._counts[side] = len(times)
         t.update(base_lin_vel=sim.base_lin_vel(), foot_loads=sim.loads.copy(), new_strikes=new,
-                 strike_counts=dict(self._counts))
+                 strike_counts=dict(self._counts), sensors=sim.sensor_readings(),
+                 gravity_true=sim.imu_site_gravity())
         return t
 
     def _render_scene(self):

@@ -15,6 +15,14 @@ from a policy using a privileged term says so (`PolicySpec.privileged`).
   phase         2   sin, cos of 2 pi t / period (t: time since reset)
   foot_phase    2k  per foot i: sin, cos of 2 pi (t / period + offsets[i])
   time          1   t, the time since reset (s): with `clip`, a start-up clock
+  gait_phase    2k  per foot i an angle initial[i] + 2 pi frequency t (frozen at initial while
+                    the command is zero, if asked), as [cos..., sin...] (grouped) or
+                    [cos, sin] per foot (interleaved)
+  gravity_true  3   unit gravity direction in the IMU frame from its true orientation: PRIVILEGED
+  sensor        k   an MJCF sensor of the robot, by name (e.g. a velocimeter): PRIVILEGED
+
+Joint terms read every joint the policy drives, in its order: the leg joints' corrected
+encoders, and a whole-body policy's other joints (waist, arms: no offsets).
 
 Each term's values are multiplied by its scale (one number or one per value) and then
 clipped to +-clip if given.
@@ -37,8 +45,16 @@ class ObsContext:
     time: float  # s since reset
     last_action: np.ndarray  # policy order
     command: np.ndarray
-    joint_index: np.ndarray  # policy joint k -> leg-map column
+    joint_index: np.ndarray  # policy joint k -> column of the body vector (leg joints, then the others)
     default_q: np.ndarray  # policy order
+    q_body: np.ndarray | None = None  # corrected encoders of the leg joints, then a whole-body policy's others
+    dq_body: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.q_body is None:  # from the env's observation: the leg joints, then any others
+            o = self.obs
+            self.q_body = np.concatenate([o["q_enc"], o["q_extra"]]) if "q_extra" in o else o["q_enc"]
+            self.dq_body = np.concatenate([o["dq_enc"], o["dq_extra"]]) if "dq_extra" in o else o["dq_enc"]
 
 
 @dataclass(frozen=True)
@@ -53,6 +69,24 @@ class Term:
 def _joints(values: np.ndarray, ctx: ObsContext, t) -> np.ndarray:
     v = values[ctx.joint_index]
     return v if t.mask is None else v[t.mask_index]
+
+
+def _gait_phase(ctx: ObsContext, t) -> np.ndarray:
+    a = np.asarray(t.initial, dtype=float)
+    if not (t.stop_at_zero_command and not np.any(ctx.command)):
+        a = a + 2 * np.pi * t.frequency * ctx.time
+    c, s = np.cos(a), np.sin(a)
+    return np.concatenate([c, s]) if t.layout == "grouped" else np.column_stack([c, s]).ravel()
+
+
+def _sensor(ctx: ObsContext, t) -> np.ndarray:
+    v = np.asarray(ctx.truth["sensors"][t.name], dtype=float)
+    if v.shape != (t.size,):
+        from legcal_bench.errors import ConfigError
+
+        raise ConfigError(f"observation term sensor {t.name!r}: the spec gives size {t.size}, the sensor has "
+                          f"{v.size} values")
+    return v
 
 
 _NO_OFFSET = np.zeros(1)
@@ -71,16 +105,19 @@ TERMS: dict[str, Term] = {
     "gravity": Term(lambda c, t: c.obs["gravity"], lambda n, t: 3),
     "base_lin_vel": Term(lambda c, t: c.truth["base_lin_vel"], lambda n, t: 3, privileged=True),
     "command": Term(lambda c, t: c.command, lambda n, t: 3),
-    "joint_pos": Term(lambda c, t: _joints(c.obs["q_enc"], c, t) - (
+    "joint_pos": Term(lambda c, t: _joints(c.q_body, c, t) - (
         c.default_q if t.mask is None else c.default_q[t.mask_index]), lambda n, t: n if t.mask is None else len(
         t.mask), per_joint=True),
-    "joint_vel": Term(lambda c, t: _joints(c.obs["dq_enc"], c, t), lambda n, t: n if t.mask is None else len(t.mask),
+    "joint_vel": Term(lambda c, t: _joints(c.dq_body, c, t), lambda n, t: n if t.mask is None else len(t.mask),
                       per_joint=True),
     "last_action": Term(lambda c, t: c.last_action if t.mask is None else c.last_action[t.mask_index],
                         lambda n, t: n if t.mask is None else len(t.mask), per_joint=True),
     "phase": Term(lambda c, t: _phase(c, t, _NO_OFFSET), lambda n, t: 2, needs_period=True),
     "time": Term(lambda c, t: np.array([c.time]), lambda n, t: 1),
     "foot_phase": Term(lambda c, t: _phase(c, t, t.offsets), lambda n, t: 2 * len(t.offsets), needs_period=True),
+    "gait_phase": Term(_gait_phase, lambda n, t: 2 * len(t.initial)),
+    "gravity_true": Term(lambda c, t: c.truth["gravity_true"], lambda n, t: 3, privileged=True),
+    "sensor": Term(_sensor, lambda n, t: t.size, privileged=True),
 }
 
 
@@ -95,13 +132,20 @@ class BoundTerm:
     mask_index: np.ndarray | None
     period: float | None
     offsets: tuple | None
+    frequency: float | None = None
+    initial: tuple | None = None
+    layout: str | None = None
+    stop_at_zero_command: bool = False
+    name: str | None = None
+    size: int | None = None
 
 
 def bind(spec) -> list[BoundTerm]:
     out = []
     for t in spec.observation:
         mi = None if t.mask is None else np.array([spec.joints.index(j) for j in t.mask])
-        out.append(BoundTerm(t.term, np.asarray(t.scale, dtype=float), t.clip, t.mask, mi, t.period, t.offsets))
+        out.append(BoundTerm(t.term, np.asarray(t.scale, dtype=float), t.clip, t.mask, mi, t.period, t.offsets,
+                             t.frequency, t.initial, t.layout, t.stop_at_zero_command, t.name, t.size))
     return out
 
 

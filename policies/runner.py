@@ -19,16 +19,25 @@ from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.walking import WalkingConfig
 
 
+def extra_joints(spec: PolicySpec, legmap: LegMap) -> list[str]:
+    """A whole-body policy's joints beyond the leg map's leg joints (in the policy's
+    order), then the joints its spec holds: the body vector's entries after the legs."""
+    return [j for j in spec.joints if j not in legmap.joint_names] + [h.joint for h in spec.hold]
+
+
 def joint_index(spec: PolicySpec, legmap: LegMap) -> np.ndarray:
-    """Leg-map column of each of the policy's joints; ConfigError if they differ."""
-    missing = [j for j in spec.joints if j not in legmap.joint_names]
-    extra = [j for j in legmap.joint_names if j not in spec.joints]
-    if missing or extra:
-        raise ConfigError(f"policy spec {spec.path}: its joints must be the leg map's {legmap.n_joints} leg joints "
-                          f"({legmap.name}), by name, in any order; "
-                          + (f"not in the leg map: {missing}; " if missing else "")
-                          + (f"leg joints the policy does not drive: {extra}" if extra else ""))
-    return np.array([legmap.joint_names.index(j) for j in spec.joints])
+    """Column of each of the policy's joints in the body vector (the leg map's leg
+    joints, then `extra_joints`); ConfigError if the policy leaves a leg joint undriven."""
+    undriven = [j for j in legmap.joint_names if j not in spec.joints]
+    if undriven:
+        others = [j for j in spec.joints if j not in legmap.joint_names]
+        raise ConfigError(f"policy spec {spec.path}: its joints must include the leg map's {legmap.n_joints} leg "
+                          f"joints ({legmap.name}), by name, in any order (a whole-body policy lists its other "
+                          "joints too: waist, arms); "
+                          + (f"not in the leg map: {others}; " if others else "")
+                          + f"leg joints the policy does not drive: {undriven}")
+    body = list(legmap.joint_names) + extra_joints(spec, legmap)
+    return np.array([body.index(j) for j in spec.joints])
 
 
 class PolicyRunner:
@@ -47,6 +56,10 @@ class PolicyRunner:
         self.default_q = np.asarray(self.spec.default_q)
         self.command = np.asarray(self.spec.command, dtype=float)
         self.last_action = np.zeros(len(self.spec.joints))
+        self.extra = extra_joints(self.spec, legmap)
+        self.n_body = legmap.n_joints + len(self.extra)
+        self.hold_q = np.array([h.q for h in self.spec.hold])
+        self.target_range = _joint_ranges(self.spec, legmap, self.extra) if self.spec.action_clip_range else None
 
     @property
     def name(self) -> str:
@@ -73,9 +86,16 @@ class PolicyRunner:
         action; the joint targets in leg-map order."""
         a = action if self.spec.action_clip is None else np.clip(action, -self.spec.action_clip,
                                                                   self.spec.action_clip)
+        if self.spec.action_clip_joints is not None:
+            bound = np.asarray(self.spec.action_clip_joints)
+            a = np.clip(a, -bound, bound)
         self.last_action = a
-        target = np.empty(self.legmap.n_joints)
+        target = np.empty(self.n_body)
         target[self.index] = self.default_q + self.spec.action_scale * a
+        if len(self.hold_q):
+            target[self.n_body - len(self.hold_q):] = self.hold_q
+        if self.target_range is not None:
+            target = np.clip(target, self.target_range[0], self.target_range[1])
         return target
 
     def action_of(self, target: np.ndarray) -> np.ndarray:
@@ -86,17 +106,49 @@ class PolicyRunner:
         return walking_config(self.spec, self.legmap, **overrides)
 
 
+def _joint_ranges(spec: PolicySpec, legmap: LegMap, extra: list[str]) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of the body vector's joints from the robot's MJCF (unlimited: +-inf)."""
+    import mujoco
+
+    m = mujoco.MjModel.from_xml_path(str(legmap.mjcf))
+    low, high = [], []
+    for name in list(legmap.joint_names) + extra:
+        j = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if j < 0:
+            raise ConfigError(f"policy spec {spec.path}: joint '{name}' is not in {legmap.mjcf}")
+        lim = bool(m.jnt_limited[j])
+        low.append(m.jnt_range[j, 0] if lim else -np.inf)
+        high.append(m.jnt_range[j, 1] if lim else np.inf)
+    return np.array(low), np.array(high)
+
+
 def walking_config(spec: PolicySpec, legmap: LegMap, **overrides) -> WalkingConfig:
-    """The walking env's servo gains, default pose and rates from a spec (leg-map order)."""
+    """The walking env's servo gains, default pose, rates and simulation settings from a
+    spec (the body vector's order: the leg joints in leg-map order, then a whole-body
+    policy's others, then the held joints)."""
     index = joint_index(spec, legmap)
+    extra = extra_joints(spec, legmap)
+    n, k = legmap.n_joints, len(extra)
 
-    def leg_order(v):
-        out = np.empty(legmap.n_joints)
+    def body_order(v, held):
+        out = np.empty(n + k)
         out[index] = v
-        return tuple(out.tolist())
+        if spec.hold:
+            out[n + k - len(spec.hold):] = held
+        return out
 
-    kw = dict(kp=leg_order(spec.kp), kd=leg_order(spec.kd), default_q=leg_order(spec.default_q),
+    kp = body_order(spec.kp, [h.kp or 0.0 for h in spec.hold])
+    kd = body_order(spec.kd, [h.kd or 0.0 for h in spec.hold])
+    q0 = body_order(spec.default_q, [h.q for h in spec.hold])
+    kw = dict(kp=tuple(kp[:n].tolist()), kd=tuple(kd[:n].tolist()), default_q=tuple(q0[:n].tolist()),
               physics_dt=1.0 / spec.physics_hz, decimation=spec.decimation,
-              torque_limit=leg_order(spec.torque_limit) if spec.torque_limit is not None else None)
+              torque_limit=tuple(body_order(spec.torque_limit, [np.inf] * len(spec.hold))[:n].tolist())
+              if spec.torque_limit is not None else None,
+              extra_joints=tuple(extra), extra_kp=tuple(kp[n:].tolist()), extra_kd=tuple(kd[n:].tolist()),
+              extra_default_q=tuple(q0[n:].tolist()), model_actuators=spec.actuators == "model",
+              keyframe=spec.keyframe,
+              sensors=tuple(t.name for t in spec.observation if t.term == "sensor"))
+    if spec.floor_friction is not None:  # the floor the policy was trained on: its friction, not the feet's
+        kw["floor_friction"], kw["floor_friction_exact"] = tuple(spec.floor_friction), True
     kw.update(overrides)
     return WalkingConfig(**kw)

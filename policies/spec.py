@@ -48,6 +48,26 @@ class ObsTerm:
     mask: tuple[str, ...] | None = None  # joint terms: only these joints (names), in the policy's order
     period: float | None = None  # phase: the clock's period (s)
     offsets: tuple[float, ...] | None = None  # foot_phase: each foot's phase offset (fraction of a period)
+    # gait_phase: per foot an angle initial[i] + 2 pi frequency t, laid out as `layout`
+    # ("grouped": all cos then all sin; "interleaved": cos, sin per foot), frozen at its
+    # initial value while the command is zero if `stop_at_zero_command`.
+    frequency: float | None = None
+    initial: tuple[float, ...] | None = None
+    layout: str | None = None
+    stop_at_zero_command: bool = False
+    name: str | None = None  # sensor: the MJCF sensor's name
+    size: int | None = None  # sensor: its values
+
+
+@dataclass(frozen=True)
+class Hold:
+    """A joint the policy does not drive, held by its servo at `q` (rad); `kp`, `kd` for
+    PD servos (`actuators: pd`), None with the model's own actuators."""
+
+    joint: str
+    q: float
+    kp: float | None = None
+    kd: float | None = None
 
 
 @dataclass(frozen=True)
@@ -68,6 +88,13 @@ class PolicySpec:
     command: tuple[float, float, float]
     observation: tuple[ObsTerm, ...]
     notes: dict = field(default_factory=dict)
+    # Whole-body policies and the simulation settings a policy was trained with.
+    hold: tuple[Hold, ...] = ()  # actuated joints the policy does not drive, held
+    actuators: str = "pd"  # pd: PD servos with kp, kd; model: the MJCF's own actuators
+    action_clip_joints: tuple[float, ...] | None = None  # per-joint clip (policy order)
+    action_clip_range: bool = False  # clip the joint targets to the joints' ranges (the MJCF's)
+    floor_friction: tuple[float, float, float] | None = None  # sliding, torsional, rolling
+    keyframe: str | int | None = None  # the MJCF keyframe the robot starts from
 
     @property
     def decimation(self) -> int:
@@ -93,6 +120,30 @@ def _numbers(v, n: int | None, where: str, positive: bool = False) -> tuple[floa
         want = f"{n} finite numbers" if n is not None else "finite numbers"
         raise ConfigError(f"{where}: must be {want}{' >= 0' if positive else ''}, got {v!r}")
     return tuple(float(x) for x in a)
+
+
+def _holds(v, joints: list, actuators: str, w: str) -> tuple[Hold, ...]:
+    """`hold: {joint: angle}` (model actuators) or `{joint: {q: angle, kp: .., kd: ..}}` (PD servos)."""
+    if v is None:
+        return ()
+    if not isinstance(v, dict):
+        raise ConfigError(f"{w}: field 'hold' must map joints the policy does not drive to the angle (rad) their "
+                          "servos hold, e.g. {waist_yaw_joint: 0.0}")
+    out = []
+    for name, e in v.items():
+        where = f"{w}: hold.{name}"
+        if name in joints:
+            raise ConfigError(f"{where}: the policy drives this joint ('joints'); hold only the others")
+        e = e if isinstance(e, dict) else {"q": e}
+        if set(e) - {"q", "kp", "kd"}:
+            raise ConfigError(f"{where}: keys q (rad), kp, kd only")
+        q = _numbers(e.get("q"), 1, f"{where}.q (rad)")[0]
+        kp = kd = None
+        if actuators == "pd":
+            kp = _numbers(e.get("kp"), 1, f"{where}.kp (N m/rad; PD servos need gains)", True)[0]
+            kd = _numbers(e.get("kd"), 1, f"{where}.kd (N m s/rad)", True)[0]
+        out.append(Hold(str(name), q, kp, kd))
+    return tuple(out)
 
 
 def builtin_policies() -> list[str]:
@@ -127,7 +178,7 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
         raise ConfigError(f"{w}: field 'format' must be {SPEC_FORMAT!r} (see legcal_bench/policies/spec.py)")
     known = {"format", "name", "model", "joints", "default_q", "action", "pd", "rates", "command", "observation",
-             "notes"}
+             "notes", "hold", "actuators", "sim"}
     unknown = set(doc) - known
     if unknown:
         raise ConfigError(f"{w}: unknown fields {sorted(unknown)}; known: {sorted(known)}")
@@ -150,14 +201,43 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     action = doc.get("action", {})
     if not isinstance(action, dict):
         raise ConfigError(f"{w}: field 'action' must be {{scale: <number>, clip: <number or null>}}")
+    unknown_action = set(action) - {"scale", "clip"}
+    if unknown_action:
+        raise ConfigError(f"{w}: action: unknown keys {sorted(unknown_action)}; known: clip, scale")
     scale = _numbers(action.get("scale", 1.0), 1, f"{w}: action.scale")[0]
-    clip = None if action.get("clip") is None else _numbers(action["clip"], 1, f"{w}: action.clip", True)[0]
+    clip, clip_joints, clip_range = None, None, False
+    if action.get("clip") == "joint_range":
+        clip_range = True
+    elif isinstance(action.get("clip"), list):
+        clip_joints = _numbers(action["clip"], n, f"{w}: action.clip (one bound per joint)", True)
+    elif action.get("clip") is not None:
+        clip = _numbers(action["clip"], 1, f"{w}: action.clip (a number, one per joint, or joint_range)", True)[0]
+    actuators = doc.get("actuators", "pd")
+    if actuators not in ("pd", "model"):
+        raise ConfigError(f"{w}: field 'actuators' is {actuators!r}: use pd (PD servos with pd.kp, pd.kd) or model "
+                          "(the robot's MJCF actuators, their gains and ranges)")
     pd = doc.get("pd")
+    if actuators == "model" and pd is None:
+        pd = {"kp": [0.0] * n, "kd": [0.0] * n}  # unused: the model's actuators
     if not isinstance(pd, dict):
         raise ConfigError(f"{w}: field 'pd' must be {{kp: [...], kd: [...]}} (N m/rad, N m s/rad, one per joint)")
     kp = _numbers(pd.get("kp"), n, f"{w}: pd.kp (N m/rad, one per joint)", True)
     kd = _numbers(pd.get("kd"), n, f"{w}: pd.kd (N m s/rad, one per joint)", True)
     tl = None if pd.get("torque_limit") is None else _numbers(pd["torque_limit"], n, f"{w}: pd.torque_limit", True)
+    hold = _holds(doc.get("hold"), joints, actuators, w)
+    sim = doc.get("sim") or {}
+    if not isinstance(sim, dict) or set(sim) - {"floor_friction", "keyframe"}:
+        raise ConfigError(f"{w}: field 'sim' must be {{floor_friction: <number or [sliding, torsional, rolling]>, "
+                          f"keyframe: <name or index>}}, got {sim!r}")
+    friction = None
+    if sim.get("floor_friction") is not None:
+        f = _numbers(sim["floor_friction"], None, f"{w}: sim.floor_friction", True)
+        if len(f) not in (1, 3):
+            raise ConfigError(f"{w}: sim.floor_friction: one number (sliding) or three (sliding, torsional, rolling)")
+        friction = (f[0], 0.005, 0.0001) if len(f) == 1 else f
+    keyframe = sim.get("keyframe")
+    if keyframe is not None and (isinstance(keyframe, bool) or not isinstance(keyframe, (str, int))):
+        raise ConfigError(f"{w}: sim.keyframe must be a keyframe's name or index in the robot's MJCF")
     rates = doc.get("rates", {})
     if not isinstance(rates, dict):
         raise ConfigError(f"{w}: field 'rates' must be {{physics_hz: ..., control_hz: ...}}")
@@ -176,9 +256,24 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
         wt = f"{w}: observation[{i}]"
         if not isinstance(t, dict) or t.get("term") not in TERMS:
             raise ConfigError(f"{wt}: 'term' must be one of {list(TERMS)}, got {t!r}")
-        extra = set(t) - {"term", "scale", "clip", "mask", "period", "offsets"}
+        extra = set(t) - {"term", "scale", "clip", "mask", "period", "offsets", "frequency", "initial", "layout",
+                          "stop_at_zero_command", "name", "size"}
         if extra:
             raise ConfigError(f"{wt}: unknown keys {sorted(extra)}")
+        gait = {}
+        if t["term"] == "gait_phase":
+            gait["frequency"] = _numbers(t.get("frequency"), 1, f"{wt}: frequency (Hz)", True)[0]
+            gait["initial"] = _numbers(t.get("initial", [0.0, np.pi]), None, f"{wt}: initial (rad, one per foot)")
+            gait["layout"] = t.get("layout", "grouped")
+            if gait["layout"] not in ("grouped", "interleaved"):
+                raise ConfigError(f"{wt}: layout {gait['layout']!r}: grouped ([cos f1, cos f2, ..., sin f1, ...]) or "
+                                  "interleaved ([cos f1, sin f1, cos f2, sin f2, ...])")
+            gait["stop_at_zero_command"] = bool(t.get("stop_at_zero_command", False))
+        if t["term"] == "sensor":
+            if not isinstance(t.get("name"), str) or not isinstance(t.get("size"), int) or t["size"] < 1:
+                raise ConfigError(f"{wt}: term sensor needs 'name' (an MJCF sensor of the robot) and 'size' (its "
+                                  "values, e.g. 3)")
+            gait.update(name=t["name"], size=t["size"])
         mask = t.get("mask")
         if mask is not None:
             if not TERMS[t["term"]].per_joint:
@@ -197,9 +292,11 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
             offsets = _numbers(t.get("offsets", [0.0, 0.5]), None, f"{wt}: offsets (fractions of a period)")
         terms.append(ObsTerm(t["term"], _numbers(t.get("scale", 1.0), None, f"{wt}: scale"),
                              None if t.get("clip") is None else _numbers(t["clip"], 1, f"{wt}: clip", True)[0],
-                             tuple(mask) if mask is not None else None, period, offsets))
+                             tuple(mask) if mask is not None else None, period, offsets, **gait))
     spec = PolicySpec(str(doc.get("name", path.stem)), path, model_file, fmt, tuple(joints), default_q, scale, clip,
-                      kp, kd, tl, physics_hz, control_hz, command, tuple(terms), doc.get("notes") or {})
+                      kp, kd, tl, physics_hz, control_hz, command, tuple(terms), doc.get("notes") or {},
+                      hold=hold, actuators=actuators, action_clip_joints=clip_joints, action_clip_range=clip_range,
+                      floor_friction=friction, keyframe=keyframe)
     from legcal_bench.policies.observation import observation_size
 
     for i, t in enumerate(spec.observation):

@@ -105,6 +105,24 @@ def _screw_terms(S: np.ndarray) -> tuple[float, bool, np.ndarray]:
     return scale, screw, X
 
 
+def _mjcf_model(path) -> pin.Model:
+    """Pinocchio's model of an MJCF. Pinocchio does not follow `<include>` (a scene file
+    that includes the robot and its sensors): such a file is read as MuJoCo's dm_control
+    reads it, includes resolved, full precision, and that text is given to Pinocchio."""
+    import tempfile
+    from pathlib import Path
+
+    path = Path(path)
+    if "<include" not in path.read_text():
+        return pin.buildModelFromMJCF(str(path))
+    from dm_control import mjcf
+
+    with tempfile.TemporaryDirectory() as folder:
+        flat = Path(folder) / path.name
+        flat.write_text(mjcf.from_path(str(path)).to_xml_string())
+        return pin.buildModelFromMJCF(str(flat))
+
+
 class LegKinematics:
     """Forward kinematics, sole Jacobians and closed-chain IK for one robot."""
 
@@ -116,7 +134,7 @@ class LegKinematics:
             if legmap.urdf is not None:  # the URDF's root link as the floating base
                 self.model = pin.buildModelFromUrdf(str(legmap.urdf), pin.JointModelFreeFlyer())
             else:
-                self.model = pin.buildModelFromMJCF(str(legmap.mjcf))
+                self.model = _mjcf_model(legmap.mjcf)
         except Exception as e:  # noqa: BLE001 - Pinocchio raises bare RuntimeErrors
             raise LegMapError(f"Pinocchio could not load {legmap.model_file}: {e}") from None
         m = self.model

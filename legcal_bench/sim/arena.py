@@ -64,14 +64,16 @@ def floor_parameters(spec: str | None) -> dict:
 
 def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,
               friction: tuple = FLOOR_FRICTION, solref: tuple = FLOOR_SOLREF, solimp: tuple = FLOOR_SOLIMP,
-              condim: int | None = None) -> None:
+              condim: int | None = None, priority: bool = False) -> None:
     """A light and a checkered plane at z = 0. With `contact`, the floor collides;
     `static_friction` (for standing still) makes friction behave as static: soft
     friction lets loaded soles creep by millimetres, so an elliptic cone with a high
     impedance ratio and a no-slip pass are used, with torsional and rolling friction
     (condim 6), and the floor's parameters define its contacts (`FLOOR_PRIORITY`).
     Without it (walking) the floor takes the given contact parameters, mixed with the
-    feet's as MuJoCo mixes them, and sliding friction only (condim 3). Without contact, every contact is disabled
+    feet's as MuJoCo mixes them (the larger friction), or with `priority` its own (a
+    policy's training floor), and sliding friction only (condim 3). Explicit `<pair>`
+    contacts in a robot's model keep their own parameters. Without contact, every contact is disabled
     (nothing else in a static scene needs one)."""
     m.worldbody.add("light", pos=[0, -1, 3], dir=[0, 0.3, -1], directional=True, diffuse=[0.7, 0.7, 0.7])
     tex = m.asset.add("texture", name="legcal_grid", type="2d", builtin="checker", width=256, height=256,
@@ -82,7 +84,7 @@ def add_floor(m: mjcf.RootElement, contact: bool, static_friction: bool = True,
                             size=[5, 5, 0.1] if static_friction else [30, 30, 0.1], material=mat,
                             contype=collide, conaffinity=collide, friction=list(friction),
                             condim=condim or (6 if static_friction else 3), solref=list(solref), solimp=list(solimp))
-    if static_friction:
+    if static_friction or priority:  # `priority` (walking): the floor's friction, not the larger of the two
         floor.priority = FLOOR_PRIORITY
     if contact and static_friction:
         m.option.cone = "elliptic"

@@ -120,10 +120,12 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001, floor: dic
     return compose_robot(m, legmap, mode, floor)
 
 
-def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | None = None) -> Scene:
+def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | None = None,
+                  release: set | frozenset = frozenset()) -> Scene:
     """The scene around robot model `m` (its options already set): the arena's floor
     (`mode` "walking": colliding, with `floor`'s contact parameters), the leg map's
-    frames and sensors, held joints, weld anchors; compiled and indexed."""
+    frames and sensors, held joints (except those in `release`: a whole-body policy
+    drives them), weld anchors; compiled and indexed."""
     where = str(legmap.source or legmap.name)
     m.option.gravity = (0, 0, -9.81)
     vis_global = getattr(m.visual, "global")
@@ -159,6 +161,8 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
             m.sensor.add("torque", name=f"legcal_{side}_torque", site=ft)
     for name, angle in legmap.held_joints_rad.items():
         _find(m, "joint", name, f"{where}: held_joints_rad")
+        if name in release:
+            continue
         m.equality.add("joint", name=f"legcal_hold_{name}", joint1=name, polycoef=[angle, 0, 0, 0, 0],
                        solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
     if mode == "weld":

@@ -69,10 +69,25 @@ class WalkingConfig:
     # The walking floor's contact: MuJoCo's defaults (the static floor is stiffer and
     # has torsional friction, for soles that must not creep).
     floor_friction: tuple[float, float, float] = (1.0, 0.005, 0.0001)
+    # True: the floor's friction is the contact's (MuJoCo's geom priority), e.g. the friction
+    # a policy was trained on; False: MuJoCo's mix with the feet's (the larger).
+    floor_friction_exact: bool = False
     floor_solref: tuple[float, float] = (0.02, 1.0)
     floor_solimp: tuple[float, ...] = (0.9, 0.95, 0.001, 0.5, 2.0)
     jitter_q_rad: float = 0.01  # initial joint angles, uniform +-
     jitter_yaw_rad: float = 0.02  # initial heading, uniform +-
+    # A whole-body policy: the robot's other joints it drives, or that its spec holds
+    # (waist, arms), after the leg joints in every joint vector (targets, observations).
+    # They carry no offsets. Their gains (pd servos) and default pose, in this order.
+    extra_joints: tuple[str, ...] = ()
+    extra_kp: tuple[float, ...] = ()
+    extra_kd: tuple[float, ...] = ()
+    extra_default_q: tuple[float, ...] = ()
+    # True: every driven joint keeps the MJCF's own actuator (e.g. position actuators with
+    # their gains and ranges; kp, kd then unused); False: PD servos with kp, kd.
+    model_actuators: bool = False
+    keyframe: str | int | None = None  # the MJCF keyframe the robot starts from (joints not driven too)
+    sensors: tuple[str, ...] = ()  # MJCF sensors read into the truth (privileged observation terms)
 
     def __post_init__(self):
         n = np.shape(self.default_q)[0] if np.ndim(self.default_q) == 1 else None  # the robot's leg joints
@@ -81,8 +96,19 @@ class WalkingConfig:
             if n is None or v.shape != (n,) or not n or not np.isfinite(v).all():
                 raise ConfigError(f"walking config: '{name}' must be finite numbers, one per leg joint (leg-map "
                                   f"order) as default_q gives, got {v.shape}")
+        k = len(self.extra_joints)
+        for name in ("extra_kp", "extra_kd", "extra_default_q"):
+            v = np.asarray(getattr(self, name), dtype=float)
+            if v.shape != (k,) or not np.isfinite(v).all():
+                raise ConfigError(f"walking config: '{name}' must be finite numbers, one per extra joint ({k}), "
+                                  f"got {v.shape}")
         if self.physics_dt <= 0 or self.decimation < 1:
             raise ConfigError("walking config: physics_dt must be > 0 and decimation >= 1")
+
+    @property
+    def body_joints(self) -> int:
+        """Entries of a target or default pose vector: the leg joints, then the extra ones."""
+        return len(self.default_q) + len(self.extra_joints)
 
     @property
     def control_dt(self) -> float:
@@ -100,30 +126,64 @@ def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
     m.option.timestep = cfg.physics_dt
     if cfg.integrator is not None:
         m.option.integrator = cfg.integrator
-    limits = np.full(legmap.n_joints, np.inf)
-    leg = set(legmap.joint_names)
-    for act in list(m.actuator.all_children()):
-        joint = getattr(act, "joint", None)
-        name = joint if isinstance(joint, str) else getattr(joint, "name", None)
-        if name in leg:
-            rng = act.forcerange if act.forcelimited in (True, "true") else (
-                act.ctrlrange * (act.gear[0] if act.gear is not None else 1.0)
-                if act.tag == "motor" and act.ctrllimited in (True, "true") and act.ctrlrange is not None else None)
-            if rng is not None:
-                limits[legmap.joint_names.index(name)] = float(np.max(np.abs(rng)))
-            act.remove()
-    if cfg.torque_limit is not None:
-        limits = np.asarray(cfg.torque_limit, dtype=float)
-    for k, name in enumerate(legmap.joint_names):
-        extra = {} if not np.isfinite(limits[k]) else dict(forcelimited=True, forcerange=[-limits[k], limits[k]])
-        m.actuator.add("general", name=f"legcal_servo_{name}", joint=name, gaintype="fixed", biastype="affine",
-                       gainprm=[cfg.kp[k]], biasprm=[0.0, -cfg.kp[k], -cfg.kd[k]], **extra)
-    scene = compose_robot(m, legmap, "walking", floor=dict(friction=cfg.floor_friction, solref=cfg.floor_solref,
-                                                           solimp=cfg.floor_solimp))
+    body = list(legmap.joint_names) + list(cfg.extra_joints)
+    where = str(legmap.source or legmap.name)
+    for name in cfg.extra_joints:
+        if m.find("joint", name) is None:
+            raise ConfigError(f"walking config: joint '{name}' (a whole-body policy's) is not in {legmap.mjcf}")
+    actuated = [_actuated_joint(a) for a in m.actuator.all_children()]
+    loose = [j for j in actuated if j is not None and j not in body and j not in legmap.held_joints_rad]
+    if cfg.extra_joints and loose:  # a whole-body run: every actuated joint driven or held, or it sags
+        raise ConfigError(f"{where}: actuated joints {loose} are neither driven by the policy nor held: list them "
+                          "in the spec's 'joints' or 'hold' (or the leg map's held_joints_rad)")
+    if cfg.model_actuators:
+        missing = [j for j in body if j not in actuated]
+        if missing:
+            raise ConfigError(f"walking config: model_actuators, but joints {missing} have no actuator in "
+                              f"{legmap.mjcf}: use PD servos (the spec's `actuators: pd`) or add them")
+    else:
+        limits = np.full(len(body), np.inf)
+        for act in list(m.actuator.all_children()):
+            name = _actuated_joint(act)
+            if name in body:
+                rng = act.forcerange if act.forcelimited in (True, "true") else (
+                    act.ctrlrange * (act.gear[0] if act.gear is not None else 1.0)
+                    if act.tag == "motor" and act.ctrllimited in (True, "true") and act.ctrlrange is not None else None)
+                if rng is not None:
+                    limits[body.index(name)] = float(np.max(np.abs(rng)))
+                act.remove()
+        if cfg.torque_limit is not None:
+            limits[:legmap.n_joints] = np.asarray(cfg.torque_limit, dtype=float)
+        kp, kd = list(cfg.kp) + list(cfg.extra_kp), list(cfg.kd) + list(cfg.extra_kd)
+        for k, name in enumerate(body):
+            extra = {} if not np.isfinite(limits[k]) else dict(forcelimited=True, forcerange=[-limits[k], limits[k]])
+            m.actuator.add("general", name=f"legcal_servo_{name}", joint=name, gaintype="fixed", biastype="affine",
+                           gainprm=[kp[k]], biasprm=[0.0, -kp[k], -kd[k]], **extra)
+    floor = dict(friction=cfg.floor_friction, solref=cfg.floor_solref, solimp=cfg.floor_solimp)
+    if cfg.floor_friction_exact:
+        floor["priority"] = True
+    scene = compose_robot(m, legmap, "walking", floor=floor, release=set(body))
     if cfg.armature is not None:
         dofs = scene.dof_adr[scene.model.dof_armature[scene.dof_adr] == 0]
         scene.model.dof_armature[dofs] = cfg.armature
     return scene
+
+
+def _actuated_joint(act) -> str | None:
+    """The joint an MJCF actuator drives (by name), or None."""
+    joint = getattr(act, "joint", None)
+    return joint if isinstance(joint, str) or joint is None else getattr(joint, "name", None)
+
+
+def _body_actuators(model: mujoco.MjModel, body_qpos: np.ndarray) -> np.ndarray:
+    """Per driven joint (legs, then extra), the actuator that drives it (by its qpos address)."""
+    out = -np.ones(len(body_qpos), dtype=int)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
+            hit = np.flatnonzero(body_qpos == model.jnt_qposadr[model.actuator_trnid[a, 0]])
+            if hit.size:
+                out[hit[0]] = a
+    return out
 
 
 @dataclass
@@ -158,6 +218,29 @@ class WalkingSim:
                                         for s in SIDES for k in ("force", "torque")]) if sc.has_ft else None)
         free = int(np.flatnonzero(m.jnt_qposadr == sc.free_qpos_adr)[0])
         self._free_dof = int(m.jnt_dofadr[free])
+        # Driven joints: the leg joints (scene order), then a whole-body policy's others.
+        extra = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j) for j in config.extra_joints]
+        self.body_qpos = np.r_[sc.qpos_adr, [m.jnt_qposadr[j] for j in extra]].astype(int)
+        self.body_dof = np.r_[sc.dof_adr, [m.jnt_dofadr[j] for j in extra]].astype(int)
+        self._n_extra = len(extra)
+        self.body_act = _body_actuators(m, self.body_qpos) if (config.model_actuators or extra) else None
+        if self.body_act is not None and (self.body_act < 0).any():
+            raise ConfigError(f"walking config: joints {[n for n, a in zip(legmap.joint_names + list(config.extra_joints), self.body_act) if a < 0]} have no actuator")
+        self._sensor_adr = {}
+        for name in config.sensors:
+            i = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SENSOR, name)
+            if i < 0:
+                raise ConfigError(f"walking config: sensor '{name}' is not in {legmap.mjcf} (its sensors: "
+                                  f"{[mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SENSOR, k) for k in range(m.nsensor)]})")
+            self._sensor_adr[name] = slice(int(m.sensor_adr[i]), int(m.sensor_adr[i] + m.sensor_dim[i]))
+        self._keyframe = None
+        if config.keyframe is not None:
+            k = (config.keyframe if isinstance(config.keyframe, int)
+                 else mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, config.keyframe))
+            if not 0 <= k < m.nkey:
+                raise ConfigError(f"walking config: keyframe {config.keyframe!r} is not in {legmap.mjcf} "
+                                  f"({m.nkey} keyframes)")
+            self._keyframe = k
         # Worked out once, used every control step: which geoms belong to a foot (side x
         # geom), the differentiated encoders' noise, gravity's specific force.
         self._foot_geom_lists = tuple(self._foot_bodies[s].tolist() for s in SIDES)
@@ -168,6 +251,10 @@ class WalkingSim:
         nj = legmap.n_joints
         self._noise_at = {"q_enc": slice(0, nj), "dq_enc": slice(nj, 2 * nj), "imu": slice(2 * nj, 2 * nj + 12)}
         self._n_noise = 2 * nj + 12 + (12 if sc.has_ft else 0)
+        # A whole-body policy's other joints: their encoders and velocities, drawn after the rest.
+        ne = self._n_extra
+        self._noise_at["extra"] = slice(self._n_noise, self._n_noise + 2 * ne)
+        self._n_noise += 2 * ne
         self._imu4 = np.empty((4, 3))  # the IMU's two samples per `observe`: [acc, gyro] now, over the step
         self.offsets = np.zeros(nj)
         self.correction = np.zeros(nj)
@@ -190,9 +277,12 @@ class WalkingSim:
         sc, m, d, cfg = self.scene, self.model, self.data, self.config
         self.offsets = np.asarray(offsets, dtype=float).copy()
         self.correction = np.asarray(correction, dtype=float).copy()
-        mujoco.mj_resetData(m, d)
-        target = np.asarray(cfg.default_q)
-        d.qpos[sc.qpos_adr] = self._true_target(target) + rng.uniform(-1, 1, len(target)) * cfg.jitter_q_rad
+        if self._keyframe is None:
+            mujoco.mj_resetData(m, d)
+        else:
+            mujoco.mj_resetDataKeyframe(m, d, self._keyframe)
+        target = np.r_[cfg.default_q, cfg.extra_default_q]
+        d.qpos[self.body_qpos] = self._true_target(target) + rng.uniform(-1, 1, len(target)) * cfg.jitter_q_rad
         yaw = rng.uniform(-1, 1) * cfg.jitter_yaw_rad
         f = sc.free_qpos_adr
         d.qpos[f:f + 3] = 0.0
@@ -217,15 +307,24 @@ class WalkingSim:
 
     def _true_target(self, target: np.ndarray) -> np.ndarray:
         # q_corr = q_true - dq + dq_hat tracks target  <=>  q_true tracks target + dq - dq_hat.
+        # A whole-body policy's other joints (after the legs) carry no offsets.
+        if self._n_extra:
+            out = np.array(target, dtype=float)
+            out[:len(self.offsets)] += self.offsets - self.correction
+            return out
         return target + self.offsets - self.correction
 
     def _ctrl(self, target: np.ndarray) -> None:
-        self.data.ctrl[self.scene.servo[0]] = self._true_target(target)
+        self.data.ctrl[self.scene.servo[0] if self.body_act is None else self.body_act] = self._true_target(target)
 
     def step(self, target: np.ndarray) -> None:
-        """Hold `target` (encoder space, corrected) for one control step."""
+        """Hold `target` (encoder space, corrected; the leg joints, then a whole-body
+        policy's others) for one control step."""
         m, d, cfg = self.model, self.data, self.config
-        d.ctrl[self.scene.servo[0]] = target + self.offsets - self.correction  # `_true_target`
+        if self.body_act is None:
+            d.ctrl[self.scene.servo[0]] = target + self.offsets - self.correction  # `_true_target`
+        else:
+            d.ctrl[self.body_act] = self._true_target(target)
         mujoco.mj_step(m, d, nstep=cfg.decimation)
         self.time += cfg.control_dt
         # The IMU's rate and specific force averaged over the step (a high-rate filter's input).
@@ -265,8 +364,23 @@ class WalkingSim:
         obs = {"q_enc": q_enc + self.correction, "dq_enc": dq, "imu_acc": acc, "imu_gyro": gyro,
                "gravity": self.R_BI @ down_I}
         if self._ft_adr is not None:
-            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng, noise[at["imu"].stop:].reshape(2, 6))
+            obs["ft"] = sen.force_torque(d.sensordata[self._ft_adr].reshape(2, 6), rng,
+                                         noise[at["imu"].stop:at["imu"].stop + 12].reshape(2, 6))
+        if self._n_extra:  # a whole-body policy's other joints: encoders without offsets
+            ne, ex = self._n_extra, noise[at["extra"]]
+            obs["q_extra"] = sen.encoders(d.qpos[self.body_qpos[-ne:]], rng, ex[:ne]) if ne else np.zeros(0)
+            obs["dq_extra"] = d.qvel[self.body_dof[-ne:]] + self._dq_sigma * ex[ne:]
         return obs
+
+    def sensor_readings(self) -> dict[str, np.ndarray]:
+        """The MJCF sensors `config.sensors` names, as the simulator computes them (the
+        truth: a privileged observation)."""
+        return {k: self.data.sensordata[a].copy() for k, a in self._sensor_adr.items()}
+
+    def imu_site_gravity(self) -> np.ndarray:
+        """The unit gravity direction in the IMU site's frame from its true orientation (privileged)."""
+        R = self.data.site_xmat[self.scene.imu_site].reshape(3, 3)
+        return R.T @ np.array([0.0, 0.0, -1.0])
 
     # ------------------------------------------------------------ ground truth
     def foot_loads(self) -> np.ndarray:
@@ -323,7 +437,9 @@ class WalkingSim:
         return z < FALL_HEIGHT_FRACTION * self.start_height or cos_tilt < _COS_FALL_TILT
 
     def torques(self) -> np.ndarray:
-        return self.data.actuator_force[self.scene.servo[0]].copy()
+        """The leg joints' actuator torques (N m)."""
+        act = self.scene.servo[0] if self.body_act is None else self.body_act[:len(self.offsets)]
+        return self.data.actuator_force[act].copy()
 
     def power(self, torques: np.ndarray | None = None) -> float:
         """Mechanical power of the leg servos (W): sum |tau * qdot| (`servo_power`)."""
