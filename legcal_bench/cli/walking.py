@@ -109,9 +109,11 @@ def cmd_walk(a: argparse.Namespace) -> int:
 def cmd_walk_eval(a: argparse.Namespace) -> int:
     from legcal_bench.calibrators.registry import get_calibrator, parse_options
     from legcal_bench.errors import ConfigError
-    from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, calibrator_options, evaluate
+    from legcal_bench.evaluation.closed_loop import TRIALS_DIR, ClosedLoopConfig, calibrator_options, evaluate, keep_trials
+    from legcal_bench.evaluation.walk import trial_offsets
     from legcal_bench.provenance import code_version, describe
     from legcal_bench.reports.closed_loop import write
+    from legcal_bench.sim.offsets import with_magnitude
 
     if a.trials < 1 or a.seconds <= 0:
         raise ConfigError(f"--trials {a.trials} / --seconds {a.seconds}: need trials >= 1 and seconds > 0")
@@ -119,36 +121,53 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     if a.setting:
         options["setting"] = a.setting
     options.update(parse_options(a.calibrator, a.option))
-    offsets = [a.offsets] if not a.sweep else [
-        (a.offsets.split("@")[0] + "@" if "@" in a.offsets else a.offsets.split(":")[0] + ":") + f"{d:g}"
-        for d in a.sweep]
+    offsets = [a.offsets] if not a.sweep else [with_magnitude(a.offsets, d) for d in a.sweep]
     from legcal_bench.benchmark.runner import make_executor
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.robots import load_robot
 
     get_calibrator(a.calibrator, **options)  # a bad option (--setting included) fails here, before any walk
-    PolicyRunner(a.policy, load_robot(a.robot, a.mjcf))  # a bad spec or robot fails here, before any worker
+    legmap = load_robot(a.robot, a.mjcf)
+    PolicyRunner(a.policy, legmap)  # a bad spec or robot fails here, before any worker
+    for off in offsets:
+        trial_offsets(off, legmap, 0)  # and a bad offsets spec
     executor, client = make_executor(a.scheduler, a.workers) if a.workers > 1 or a.scheduler else (None, None)
     summaries, trials = [], []
     try:
-        for off in offsets:
-            cfg = ClosedLoopConfig(robot=a.robot, policy=a.policy, offsets=off, trials=a.trials, seconds=a.seconds,
-                                   calibrator=a.calibrator, options=options, static_sensors=a.static_sensors,
-                                   walk_sensors=a.sensors, mjcf=a.mjcf)
-            s, t = evaluate(cfg, executor, progress=not a.quiet)
-            summaries.append(s)
-            trials.append(t)
+        with keep_trials(a.out) as store:  # each trial written as it finishes; a rerun takes the finished ones
+            for off in offsets:
+                cfg = ClosedLoopConfig(robot=a.robot, policy=a.policy, offsets=off, trials=a.trials, seconds=a.seconds,
+                                       calibrator=a.calibrator, options=options, static_sensors=a.static_sensors,
+                                       walk_sensors=a.sensors, mjcf=a.mjcf)
+                s, t = evaluate(cfg, executor, progress=not a.quiet)
+                summaries.append(s)
+                trials.append(t)
     finally:
         if executor is not None:
             executor.shutdown()
         if client is not None:
             client.close()
-    made_by = (f"legcal-bench walk-eval --robot {a.robot} --policy {a.policy} --offsets {a.offsets} --trials {a.trials} "
-               f"--calibrator {a.calibrator}" + (f" --setting {a.setting}" if a.setting else "")
+    made_by = (f"legcal-bench walk-eval --robot {a.robot}" + (f" --mjcf {a.mjcf}" if a.mjcf else "")
+               + f" --policy {a.policy} --offsets {a.offsets} --trials {a.trials} "
+               f"--seconds {a.seconds:g} --calibrator {a.calibrator}" + (f" --setting {a.setting}" if a.setting else "")
                + (" --sweep " + " ".join(f"{d:g}" for d in a.sweep) if a.sweep else "")
                + "".join(f" --option {kv}" for kv in a.option or [])
-               + (f" --static-sensors {a.static_sensors}" if a.static_sensors != "calibrated-imu" else ""))
-    print(write(a.out, summaries, trials, describe(code_version()), made_by))
+               + (f" --static-sensors {a.static_sensors}" if a.static_sensors != "calibrated-imu" else "")
+               + (f" --sensors {a.sensors}" if a.sensors != "realistic" else ""))
+    print(write(a.out, summaries, trials, describe(code_version()), made_by, computed=set(store.written)))
+    total = sum(len(t) for t in trials)
+    if store.reused:
+        print(f"resumed: {len(store.reused)} of {total} trial(s) taken from {a.out}/{TRIALS_DIR} (finished by an "
+              f"earlier run with the same settings), {len(store.written)} run now")
+    for s in summaries:
+        if s["calibrated"] == 0:
+            print(f"offsets {s['config']['offsets']}: no trial was calibrated (the static session set failed in all "
+                  f"{s['config']['trials']}; first reason: {s['static_failed']['first_reason']}); no corrected walk")
+    static_s = [t["static_s"] for ts in trials for t in ts]
+    walk_s = [t[c]["wall_s"] for ts in trials for t in ts for c in ("nominal", "uncorrected", "corrected", "oracle")
+              if "wall_s" in t[c]]
+    print(f"wall clock (timings.json): static collection + calibration {sum(static_s) / len(static_s):.2f} s a trial, "
+          f"a walk {sum(walk_s) / len(walk_s):.2f} s")
     print(f"wrote the report in {a.out}")
     return 0
 
@@ -222,9 +241,12 @@ def add_commands(sub) -> None:
                                          "offsets, then nominal, uncorrected, corrected and oracle walks")
     robot_args(e)
     e.add_argument("--policy", required=True, help="policy spec YAML")
-    e.add_argument("--offsets", default="paper@3", help="paper@<deg> (the paper's signs, every joint) or "
-                                                        "random:<deg> (a pattern per trial)")
-    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg) to sweep, e.g. 1 2 3")
+    e.add_argument("--offsets", default="paper@3", help="paper@<deg> (the paper's signs, every joint), random:<deg> "
+                                                        "(a pattern per trial: trial s draws from seed 20000 + s), "
+                                                        "random:<deg>@<seed> (the same, trial s from seed <seed> + s), "
+                                                        "or one radian per leg joint, comma-separated")
+    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg) to sweep, e.g. 1 2 3 "
+                                                                        "(replacing <deg> of paper@ or random:)")
     e.add_argument("--trials", type=int, default=35)
     e.add_argument("--seconds", type=float, default=20.0)
     e.add_argument("--calibrator", default="interfoot")
@@ -237,7 +259,9 @@ def add_commands(sub) -> None:
     e.add_argument("--sensors", default="realistic", help="sensors while walking")
     e.add_argument("--workers", type=int, default=2, help="local worker processes (default 2; 1 runs here)")
     e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786)")
-    e.add_argument("--out", default="reports/walk_eval", help="report folder (markdown, its JSON, plots)")
+    e.add_argument("--out", default="reports/walk_eval", help="report folder (report.md, report.json, paths.png, "
+                                                                "timings.json) with each finished trial in "
+                                                                "trials/; rerun into it to resume an interrupted run")
     e.add_argument("--quiet", action="store_true")
     e.set_defaults(func=cmd_walk_eval)
 

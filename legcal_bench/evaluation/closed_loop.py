@@ -1,7 +1,8 @@
 """The closed-loop evaluation: what a calibration does to a walking policy (issue #15).
 
 Per trial (seed s), paired: the offsets of the trial (`trial_offsets`: `paper@D` the
-same in every trial, `random:D` a pattern per trial) are put on the robot, and
+same in every trial, `random:D` a pattern per trial drawn from seed 20000 + s,
+`random:D@S` the same from seed S + s) are put on the robot, and
 
   1. a static session set of the same robot with the same offsets and fresh noise is
      collected (weld floor, `calibrated-imu` sensors, stances I-IV, no held-out
@@ -16,21 +17,37 @@ same in every trial, `random:D` a pattern per trial) are put on the robot, and
 Metrics per condition against the same seed's nominal walk (`deviation`): pelvis-
 trajectory and foot-strike RMS deviation (mm; trials where either walk fell are
 excluded and counted), upright, time to fall, mean torque and power. The oracle walk
-repeats the nominal one up to floating-point rounding (same seed, same true joint
-targets), so its deviation is not a noise floor; the noise floor is the nominal
-seed-to-seed spread: a nominal walk with other sensor noise and initial jitter
+has the same seed and the same true joint targets as the nominal one; with some
+policies it repeats the nominal walk up to floating-point rounding, with others the
+rounding grows into centimetres (the summary's `oracle_distance`: its mean and max
+distance from nominal, which the report's wording follows). The other yardstick is the
+nominal seed-to-seed spread: a nominal walk with other sensor noise and initial jitter
 (`SPREAD_SEED_OFFSET`) against the trial's nominal walk. The leg-odometry check
 (`legcal_bench.evaluation.odometry`) runs on each nominal walk with the trial's offsets
 added to the logged encoders afterwards, before and after the trial's correction. Trials run through
 any `concurrent.futures.Executor` (local processes, or Dask's), each trial's static estimate, walks
 and odometry a task of its own (the same numbers as one trial a task, `run_trial`).
+
+Resume (`TrialStore`, `keep_trials`; `walk-eval --out DIR`): each trial's row is written
+as it finishes, atomically, to `DIR/trials/s<seed>_<key>.json`, `<key>` a stable hash
+(`trial_key`) of everything that makes the row: the robot's leg map and MJCF (their
+contents), the policy's spec and model file (contents), the offsets spec and the
+trial's drawn offsets, the seed, seconds, calibrator with its options and settings (and
+the variants'), static and walking sensors, the seed bases, `RESULTS_VERSION` and
+`ROW_VERSION`. A rerun takes the rows whose key matches and runs only the rest; rows of
+other settings in the same folder have other keys and are never read. The git commit is
+recorded in each file, not keyed (as the benchmark's cells, `legcal_bench.provenance`).
 """
 
 from __future__ import annotations
 
+import contextvars
+import hashlib
+import json
 import tempfile
 import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -44,6 +61,9 @@ STATIC_SEED_BASE = 30_000  # the static session set of trial s is collected with
 PATH_STEP = 5  # pelvis paths kept for the plot: every 5th control step
 SPREAD_SEED_OFFSET = 100_000  # the spread walk of trial s uses seed s + SPREAD_SEED_OFFSET
 ODOMETRY_KEYS = ("vertical_mm", "forward_mm", "lateral_mm", "total_mm", "final_vertical_drift_mm")
+ROW_VERSION = 1  # a trial row's layout (its file's key): bump when rows change without a RESULTS_VERSION bump
+TRIALS_DIR = "trials"  # finished trials under a run's folder (`TrialStore`)
+TIMING_KEYS = ("static_s", "wall_s", "walk_s")  # wall-clock fields: a trial's, a walk's, the summary's
 
 
 @dataclass(frozen=True)
@@ -254,9 +274,10 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
                 conds[c][k] = mean_std([r.get(k) for r in rows])
     ratios = {}
     for k in ("foot_strike_rms_mm", "pelvis_rms_mm"):
-        u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else np.nan for c in ("uncorrected", "corrected", "oracle"))
-        ratios[k] = {"corrected_over_uncorrected": float(cor / u), "corrected_over_oracle": float(cor / ora)}
+        u, cor, ora = (conds[c][k]["mean"] if conds[c][k] else None for c in ("uncorrected", "corrected", "oracle"))
+        ratios[k] = {"corrected_over_uncorrected": _ratio(cor, u), "corrected_over_oracle": _ratio(cor, ora)}
     spread = {k: mean_std([t["spread"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
+    oracle = {k: mean_max([t["oracle"].get(k) for t in trials]) for k in ("foot_strike_rms_mm", "pelvis_rms_mm")}
     variants = {}
     for label in (trials[0]["variants"] if trials else {}):
         rows = [t["variants"][label] for t in trials if "skipped" not in t["variants"][label]]
@@ -274,8 +295,9 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
     odometry["distance_m"] = mean_std([o["pitch"]["distance_m"] for o in odo])
     odometry["contact_point"] = odo[0]["contact_point"] if odo else None
     failed = [t for t in trials if t.get("static_failed")]
-    return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread, "odometry": odometry,
-            "variants": variants,
+    return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread,
+            "oracle_distance": oracle, "calibrated": sum(t["estimate_rad"] is not None for t in trials),
+            "odometry": odometry, "variants": variants,
             "recovery_rms_deg": mean_std([t["recovery_rms_deg"] for t in trials if t["recovery_rms_deg"] is not None]),
             "static_failed": {"count": len(failed), "seeds": [t["seed"] for t in failed],
                               "first_reason": failed[0]["static_failed"] if failed else None},
@@ -284,26 +306,178 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
             "privileged": trials[0]["privileged"] if trials else []}
 
 
-def evaluate(cfg: ClosedLoopConfig, executor=None, progress: bool = True) -> tuple[dict, list[dict]]:
+def _ratio(a: float | None, b: float | None) -> float | None:
+    """a / b, or None where either is missing or b is not a positive number."""
+    if a is None or b is None or not (np.isfinite(a) and np.isfinite(b)) or b <= 0:
+        return None
+    return float(a / b)
+
+
+def mean_max(values) -> dict | None:
+    """{"mean", "max", "n"} of the finite values among `values` (None skipped); None if none."""
+    v = np.asarray([x for x in values if x is not None and np.isfinite(x)], dtype=float)
+    return {"mean": float(v.mean()), "max": float(v.max()), "n": int(v.size)} if v.size else None
+
+
+def evaluate(cfg: ClosedLoopConfig, executor=None, progress: bool = True,
+             store: TrialStore | None = None) -> tuple[dict, list[dict]]:
     """All trials (through `executor` if given, else here), summarized. Through an
     executor each trial's parts are tasks of their own (`trial_tasks`), so the workers
-    stay busy to the end; the numbers are those of `run_trial`."""
+    stay busy to the end; the numbers are those of `run_trial`. With a `store` (given,
+    or the one `keep_trials` set), each trial is written there as it finishes and the
+    trials it already holds for `cfg` are taken, not run again; the rows are then the
+    store's (as read back from JSON), finished in this run or an earlier one alike."""
     from tqdm import tqdm
 
+    store = store if store is not None else _STORE.get()
     seeds = range(cfg.first_seed, cfg.first_seed + cfg.trials)
-    desc = f"walk-eval {cfg.offsets} {cfg.calibrator}"
+    trials = [row for row in (store.load(cfg, s) for s in seeds) if row is not None] if store is not None else []
+    todo = [s for s in seeds if s not in {t["seed"] for t in trials}]
+
+    def finished(row: dict) -> dict:
+        return store.save(cfg, row) if store is not None else row
+
+    desc = f"walk-eval {offsets_label(cfg.offsets)} {cfg.calibrator}"
     if executor is None:
-        bar = tqdm(total=cfg.trials, desc=desc, unit="trial", disable=not progress)
-        trials = []
-        for s in seeds:
-            trials.append(run_trial(cfg, s))
+        bar = tqdm(total=len(todo), desc=desc, unit="trial", disable=not progress)
+        for s in todo:
+            trials.append(finished(run_trial(cfg, s)))
             bar.update(1)
     else:
-        bar = tqdm(total=cfg.trials * tasks_per_trial(cfg), desc=desc, unit="task", disable=not progress)
-        trials = list(trial_tasks(cfg, seeds, executor, bar))
+        bar = tqdm(total=len(todo) * tasks_per_trial(cfg), desc=desc, unit="task", disable=not progress)
+        trials += [finished(row) for row in trial_tasks(cfg, todo, executor, bar)]
     bar.close()
     trials.sort(key=lambda t: t["seed"])
     return summarize(cfg, trials), trials
+
+
+def offsets_label(spec: str, width: int = 24) -> str:
+    """`spec` as a short label (a progress bar's, a plot's): as given if short, else
+    "N explicit offsets" (comma-separated radians) or its start."""
+    s = str(spec).strip()
+    if len(s) <= width:
+        return s
+    if "," in s:
+        return f"{len(s.split(','))} explicit offsets"
+    return s[:width - 3] + "..."
+
+
+def _file_hash(path) -> str | None:
+    """sha256 (16 hex digits) of a file's bytes; None for no file."""
+    if path is None or not Path(path).is_file():
+        return None
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()[:16]
+
+
+def trial_identity(cfg: ClosedLoopConfig) -> dict:
+    """What determines every trial of `cfg` but its seed: the robot's and policy's files
+    by content (not where they lie), the offsets spec, seconds, calibrator (name, options,
+    settings) and variants, the static set's and walks' settings and seed bases, and the
+    code's `RESULTS_VERSION` and `ROW_VERSION`. `cfg.trials` and `cfg.first_seed` are not
+    in it: a longer run takes a shorter one's trials."""
+    from legcal_bench.calibrators.registry import get_calibrator
+    from legcal_bench.policies.spec import load_policy_spec
+    from legcal_bench.provenance import RESULTS_VERSION
+    from legcal_bench.robots import load_robot, robot_label
+
+    legmap, spec = load_robot(cfg.robot, cfg.mjcf), load_policy_spec(cfg.policy)
+    return {"row_version": ROW_VERSION, "results_version": RESULTS_VERSION,
+            "robot": {"name": robot_label(cfg.robot), "legmap": _file_hash(legmap.source),
+                      "mjcf": _file_hash(legmap.mjcf)},
+            "policy": {"spec": _file_hash(spec.path), "model": _file_hash(spec.model_file)},
+            "offsets": cfg.offsets, "seconds": cfg.seconds,
+            "calibrator": {"name": cfg.calibrator, "options": cfg.options,
+                           "settings": get_calibrator(cfg.calibrator, **cfg.options).settings()},
+            "variants": [{"label": label, "name": name, "options": dict(opts),
+                          "settings": get_calibrator(name, **dict(opts)).settings()}
+                         for label, name, opts in cfg.variants],
+            "static": {"mode": cfg.static_mode, "sensors": cfg.static_sensors, "heldout": cfg.heldout,
+                       "seed_base": STATIC_SEED_BASE},
+            "walks": {"sensors": cfg.walk_sensors, "spread_seed_offset": SPREAD_SEED_OFFSET, "path_step": PATH_STEP}}
+
+
+def trial_key(identity: dict, seed: int, offsets_rad) -> str:
+    """The resume key of one trial: its settings' `trial_identity`, its seed and the
+    offsets drawn for it (`trial_offsets`)."""
+    from legcal_bench.provenance import stable_hash
+
+    return stable_hash({"identity": identity, "seed": int(seed), "offsets_rad": [float(x) for x in offsets_rad]})
+
+
+class TrialStore:
+    """Finished trials in `<folder>/trials/s<seed>_<key>.json` (`trial_key`), each written
+    atomically as it finishes; `load` returns a trial only if its file's key is the one
+    `cfg` and the seed give now. `reused` and `written` list the (offsets, seed) taken
+    from files and written in this process."""
+
+    FORMAT = "legcal-walk-eval-trial/1"
+
+    def __init__(self, folder: str | Path):
+        self.dir = Path(folder) / TRIALS_DIR
+        self.reused: list[tuple[str, int]] = []
+        self.written: list[tuple[str, int]] = []
+        self._identities: dict[str, tuple] = {}  # config hash -> (identity, leg map, {seed: key})
+
+    def _of(self, cfg: ClosedLoopConfig) -> tuple:
+        from legcal_bench.provenance import stable_hash
+        from legcal_bench.robots import load_robot
+
+        k = stable_hash(asdict(cfg))
+        if k not in self._identities:
+            self._identities[k] = (trial_identity(cfg), load_robot(cfg.robot, cfg.mjcf), {})
+        return self._identities[k]
+
+    def identity(self, cfg: ClosedLoopConfig) -> dict:
+        return self._of(cfg)[0]
+
+    def key(self, cfg: ClosedLoopConfig, seed: int) -> str:
+        identity, legmap, keys = self._of(cfg)
+        if seed not in keys:
+            keys[seed] = trial_key(identity, seed, trial_offsets(cfg.offsets, legmap, seed))
+        return keys[seed]
+
+    def path(self, cfg: ClosedLoopConfig, seed: int) -> Path:
+        return self.dir / f"s{int(seed):04d}_{self.key(cfg, seed)}.json"
+
+    def load(self, cfg: ClosedLoopConfig, seed: int) -> dict | None:
+        path = self.path(cfg, seed)
+        try:
+            doc = json.loads(path.read_text())
+        except (OSError, ValueError):
+            return None
+        if doc.get("format") != self.FORMAT or doc.get("key") != self.key(cfg, seed) or doc.get("seed") != seed:
+            return None
+        self.reused.append((cfg.offsets, seed))
+        return doc["trial"]
+
+    def save(self, cfg: ClosedLoopConfig, row: dict) -> dict:
+        """Write `row` (trial `row["seed"]` of `cfg`); returns it as read back from the
+        file's JSON, the form a later run's `load` gives."""
+        from legcal_bench.files.atomic import atomic_write_text
+        from legcal_bench.provenance import code_version
+
+        seed = row["seed"]
+        doc = {"format": self.FORMAT, "key": self.key(cfg, seed), "seed": seed, "identity": self.identity(cfg),
+               "provenance": code_version(), "trial": row}
+        text = json.dumps(doc, indent=2, sort_keys=True) + "\n"
+        atomic_write_text(self.path(cfg, seed), text)
+        self.written.append((cfg.offsets, seed))
+        return json.loads(text)["trial"]
+
+
+_STORE: contextvars.ContextVar[TrialStore | None] = contextvars.ContextVar("closed_loop_trial_store", default=None)
+
+
+@contextmanager
+def keep_trials(folder: str | Path):
+    """Within the block, `evaluate` keeps its trials in a `TrialStore` of `folder` (and
+    resumes from it) without being passed one; yields the store."""
+    store = TrialStore(folder)
+    token = _STORE.set(store)
+    try:
+        yield store
+    finally:
+        _STORE.reset(token)
 
 
 def tasks_per_trial(cfg: ClosedLoopConfig) -> int:

@@ -125,7 +125,8 @@ def _walk_sim(u, runner, obs, n, t, pelvis, logs):
 
     sim = u.sim
     d, sc = sim.data, sim.scene
-    f, servo, dof = sc.free_qpos_adr, sc.servo[0], sc.dof_adr
+    f, dof = sc.free_qpos_adr, sc.dof_adr
+    servo = sc.servo[0] if sim.body_act is None else sim.body_act[:u.legmap.n_joints]  # `WalkingSim.torques`
     tau, qvel = np.empty((n, u.legmap.n_joints)), np.empty((n, u.legmap.n_joints))
     k = 0
     for k in range(n):
@@ -162,9 +163,14 @@ PATTERN_SEED_BASE = 20_000  # the random:<deg> pattern of trial s comes from def
 
 def trial_offsets(spec: str, legmap, seed: int) -> np.ndarray:
     """The offsets of trial `seed`: a fixed pattern (`paper@3`, one radian per leg joint...) is the
-    same in every trial; `random:<deg>` draws one pattern per trial."""
-    from legcal_bench.sim.offsets import resolve_offsets
+    same in every trial; `random:<deg>` draws one pattern per trial, trial s's from
+    `default_rng(PATTERN_SEED_BASE + s)`; `random:<deg>@<seed>` fixes the patterns' seed:
+    trial s's from `default_rng(<seed> + s)` (so `random:3@20000` is `random:3`)."""
+    from legcal_bench.sim.offsets import parse_random, random_pattern, resolve_offsets
 
+    if isinstance(spec, str) and spec.strip().startswith("random:"):
+        deg, base = parse_random(spec)
+        return random_pattern(deg, legmap, np.random.default_rng((PATTERN_SEED_BASE if base is None else base) + seed))
     return resolve_offsets(spec, legmap, np.random.default_rng(PATTERN_SEED_BASE + seed))
 
 

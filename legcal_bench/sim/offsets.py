@@ -2,6 +2,12 @@
 
 The corrected angle is q = q_enc + dq, so a robot with offsets dq reports
 q_enc = q_true - dq. Presets map by joint role, never by position.
+
+Random patterns: `random:<deg>` draws every joint's offset uniformly in [-deg, +deg]
+from the generator its caller seeds (a session set's seed, a trial's: see
+`legcal_bench.evaluation.walk.trial_offsets`); `random:<deg>@<seed>` fixes the
+pattern's seed: it draws from `numpy.random.default_rng(<seed>)` whatever the caller's
+generator (a trial-by-trial evaluation draws trial s's pattern from seed <seed> + s).
 """
 
 from __future__ import annotations
@@ -84,10 +90,49 @@ def _degrees(spec: str, prefix: str, example: str) -> float:
     return deg
 
 
+def parse_random(spec: str) -> tuple[float, int | None]:
+    """(<deg>, <seed>) of `random:<deg>` (seed None) or `random:<deg>@<seed>`; <deg> in
+    [0, 10], <seed> a whole number >= 0."""
+    s = spec.strip()
+    deg_text, at, seed_text = s[len("random:"):].partition("@")
+    try:
+        deg = float(deg_text)
+    except ValueError:
+        raise OffsetSpecError(f"offsets {spec!r}: write random:<deg> or random:<deg>@<seed>, e.g. random:1.5 or "
+                              "random:1.5@7") from None
+    if not 0 <= deg <= 10:
+        raise OffsetSpecError(f"offsets {spec!r}: <deg> must be in [0, 10] degrees")
+    if not at:
+        return deg, None
+    if not (seed_text.strip().isascii() and seed_text.strip().isdigit()):
+        raise OffsetSpecError(f"offsets {spec!r}: write random:<deg>@<seed> with <seed> a whole number >= 0, "
+                              "e.g. random:1.5@7")
+    return deg, int(seed_text)
+
+
+def random_pattern(deg: float, legmap: LegMap, rng: np.random.Generator) -> np.ndarray:
+    """One `random:<deg>` pattern (rad): every leg joint uniform in [-deg, +deg] from `rng`."""
+    return rng.uniform(-1, 1, legmap.n_joints) * np.deg2rad(deg)
+
+
+def with_magnitude(spec: str, deg: float) -> str:
+    """`spec` with its magnitude replaced by `deg` (a sweep): `paper@<deg>`, or
+    `random:<deg>` keeping its `@<seed>`; other specs have no magnitude to sweep."""
+    s = spec.strip() if isinstance(spec, str) else ""
+    if s.startswith("paper@"):
+        return f"paper@{deg:g}"
+    if s.startswith("random:"):
+        _, seed = parse_random(s)
+        return f"random:{deg:g}" + (f"@{seed}" if seed is not None else "")
+    raise OffsetSpecError(f"offsets {spec!r}: a sweep needs paper@<deg> or random:<deg> (with or without @<seed>), "
+                          "whose <deg> it replaces")
+
+
 def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
                     rng: np.random.Generator | None = None) -> np.ndarray:
     """The vector of offsets (rad, one per leg joint: `legmap.n_joints`) for `spec`;
-    `random:<deg>` draws from `rng` uniformly in [-deg, +deg] per joint. A paper preset
+    `random:<deg>` draws from `rng` uniformly in [-deg, +deg] per joint,
+    `random:<deg>@<seed>` from `default_rng(<seed>)` instead (`rng` unused). A paper preset
     on a robot lacking one of the paper's roles: `paper_note` says what is left out."""
     n = legmap.n_joints
     if not isinstance(spec, str):
@@ -111,10 +156,12 @@ def resolve_offsets(spec: str | np.ndarray | Sequence[float], legmap: LegMap,
         # The signs of the paper's injection by role, <deg> on every joint (issue #13's "paper@3").
         return np.sign(paper_injection(legmap)) * np.deg2rad(_degrees(spec, "paper@", "3"))
     if s.startswith("random:"):
-        deg = _degrees(spec, "random:", "1.5")
+        deg, seed = parse_random(spec)
+        if seed is not None:
+            rng = np.random.default_rng(seed)
         if rng is None:
-            raise OffsetSpecError("offsets random:<deg> needs a seeded generator")
-        return rng.uniform(-1, 1, n) * np.deg2rad(deg)
+            raise OffsetSpecError("offsets random:<deg> needs a seeded generator (or write random:<deg>@<seed>)")
+        return random_pattern(deg, legmap, rng)
     parts = s.split(",")
     if len(parts) == n:
         try:

@@ -26,9 +26,11 @@ def test_one_trial_calibrates_then_walks_four_conditions(tmp_path, capsys):
     # 3 deg on every joint moves the walk by decimetres in 4 s; the static calibration
     # (0.01-0.02 deg) leaves millimetres; the true correction repeats the nominal walk.
     assert unc > 300 and cor < 0.05 * unc and ora < 1.0
-    assert t["recovery_rms_deg"] < 0.05 and t["static_s"] > 0 and s["config"]["options"] == {"setting": "sensor"}
+    assert t["recovery_rms_deg"] < 0.05 and s["config"]["options"] == {"setting": "sensor"}
+    # Wall-clock times beside the report, not in it (a resumed run's report is an uninterrupted one's).
+    assert json.loads((tmp_path / "timings.json").read_text())["evaluations"][0]["trials"][0]["static_s"] > 0
     assert s["nominal_spread"]["pelvis_rms_mm"]["n"] == 1
-    assert (tmp_path / "paths_paper_3.png").stat().st_size > 10_000
+    assert (tmp_path / "paths.png").stat().st_size > 10_000  # a fixed name, nothing of the offsets in it
     assert "| corrected | 1/1 |" in (tmp_path / "report.md").read_text()
 
 
