@@ -11,15 +11,18 @@ MuJoCo's step, the walking-only model additions of `WalkingConfig`).
 ## Action space
 `Box(n)`: joint position targets, one per leg joint (n = `legmap.n_joints`: 12 for
 six-joint legs, 10 without ankle roll; rad, leg-map order, encoder space: what the
-robot's software commands), within the joints' ranges widened by 0.5 rad.
+robot's software commands), within the joints' ranges widened by 0.5 rad. With a
+whole-body policy's spec, the leg joints are followed by the policy's other joints
+(waist, arms) and the joints its spec holds (`WalkingConfig.extra_joints`).
 
 ## Observation space
 `Dict`, what the robot's software reads, in leg-map order and the base frame through
 the nominal IMU mount: `q_enc` (n,) corrected encoder angles (rad), `dq_enc` (n,)
 joint velocities (rad/s), `ang_vel` (3,) the gyro's rate (rad/s), `gravity` (3,) the
 unit gravity direction from an orientation filter on the IMU (its noise, bias and
-mounting tilt included), `imu_acc`, `imu_gyro` (3,) raw IMU readings (IMU frame), and
-`ft` (2, 6) ankle force/torque where the leg map has them.
+mounting tilt included), `imu_acc`, `imu_gyro` (3,) raw IMU readings (IMU frame),
+`ft` (2, 6) ankle force/torque where the leg map has them, and with a whole-body policy
+`q_extra`, `dq_extra`: its other joints' encoders (no offsets) and velocities.
 
 ## Rewards
 None (0): the env evaluates fixed policies; what a run did is in `info`.
@@ -42,8 +45,9 @@ tilted more than 1 rad (`legcal_bench.sim.walking`). Registered ids truncate aft
 The truth: `time`, `pelvis_pose` [x y z qw qx qy qz], `base_lin_vel` (base frame;
 privileged), `q_true`, `torque` (n, N m), `power` (W, sum |tau qdot|), `foot_loads`
 (N, left/right), `new_strikes` (this step's touchdowns: (side, time, [x, y, z])),
-`strike_counts`, `fallen`, `fallen_at`, `offsets`, `correction`. Every touchdown so
-far: `env.unwrapped.sim.strikes`.
+`strike_counts`, `fallen`, `fallen_at`, `offsets`, `correction`, `sensors` (the MJCF
+sensors a spec's privileged `sensor` terms name) and `gravity_true` (the IMU frame's
+true gravity direction; privileged). Every touchdown so far: `env.unwrapped.sim.strikes`.
 
 ## Arguments
 `robot` (built-in name or leg-map path; required for the `-Path-` id), `policy` (a

@@ -4,7 +4,8 @@ small networks ran up to 10x slower multithreaded).
 
   torchscript   torch.jit.load (legged_gym-style exports, e.g. `policy.pt`)
   torch.export  torch.export.load(...).module() (`.pt2` files)
-  onnx          onnxruntime, CPU provider (MuJoCo Playground-style exports)
+  onnx          onnxruntime, CPU provider (MuJoCo Playground-style exports; a recurrent
+                export's state inputs fed back from its outputs, zeros at reset)
 
 `load_model` checks the network against the spec's observation and action sizes and
 names the mismatch. A recurrent torch policy keeps its memory in buffers (legged_gym's
@@ -102,6 +103,49 @@ def _eager_mlp(module, run: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.
     return eager if same else None
 
 
+def _onnx(session, n_obs: int, where: str) -> Model:
+    """An ONNX policy: one input is the observation (the one named `obs`, else the one of
+    `n_obs` values); a recurrent export's other inputs are its state, fed back from the
+    outputs after the action (the first output), paired in order and shape (`h_in` ->
+    `h_out`, ...), zeros at reset."""
+    inputs, outputs = session.get_inputs(), session.get_outputs()
+    named = [i for i in inputs if i.name == "obs"]
+    sized = [i for i in inputs if isinstance(i.shape[-1], int) and i.shape[-1] == n_obs]
+    obs_in = named[0] if named else (sized[0] if len(sized) == 1 else inputs[0])
+    shape = obs_in.shape
+    if isinstance(shape[-1], int) and shape[-1] != n_obs:
+        raise ConfigError(f"{where}: the ONNX model takes {shape[-1]} observation values; the spec's observation "
+                          f"terms give {n_obs}")
+    states = [i for i in inputs if i is not obs_in]
+    if len(outputs) < 1 + len(states):
+        raise ConfigError(f"{where}: the ONNX model has state inputs {[i.name for i in states]} but "
+                          f"{len(outputs) - 1} outputs after the action to feed them back: a recurrent policy "
+                          "returns its next state after the action, one output per state input, in order")
+
+    def concrete(shape) -> tuple:
+        return tuple(d if isinstance(d, int) else 1 for d in shape)
+
+    for i, o in zip(states, outputs[1:]):
+        if concrete(i.shape) != concrete(o.shape):
+            raise ConfigError(f"{where}: ONNX state input {i.name} {i.shape} and output {o.name} {o.shape} differ: "
+                              "the state outputs must follow the action in the order of the state inputs")
+    types = {"tensor(float)": np.float32, "tensor(double)": np.float64}
+    zero = {i.name: np.zeros(concrete(i.shape), dtype=types.get(i.type, np.float32)) for i in states}
+    state = dict(zero)
+    names = [o.name for o in outputs[:1 + len(states)]]
+
+    def run(obs: np.ndarray) -> np.ndarray:
+        out = session.run(names, {obs_in.name: obs[None], **state})
+        for i, value in zip(states, out[1:]):
+            state[i.name] = value
+        return np.asarray(out[0], dtype=np.float64).reshape(-1)
+
+    def reset() -> None:
+        state.update(zero)
+
+    return Model(run, reset)
+
+
 def load_model(path, fmt: str, n_obs: int, n_act: int, where: str = "policy") -> Model:
     if fmt in ("torchscript", "torch.export"):
         import torch
@@ -130,17 +174,7 @@ def load_model(path, fmt: str, n_obs: int, n_act: int, where: str = "policy") ->
         except Exception as e:
             raise ConfigError(f"{where}: {path} is not an ONNX model ({type(e).__name__}); check model.format") \
                 from None
-        inp = session.get_inputs()
-        if len(inp) != 1:
-            raise ConfigError(f"{where}: the ONNX model takes {len(inp)} inputs ({[i.name for i in inp]}); the runner "
-                              "feeds one observation vector")
-        name = inp[0].name
-        shape = inp[0].shape
-        if isinstance(shape[-1], int) and shape[-1] != n_obs:
-            raise ConfigError(f"{where}: the ONNX model takes {shape[-1]} observation values; the spec's observation "
-                              f"terms give {n_obs}")
-
-        model = Model(lambda obs: np.asarray(session.run(None, {name: obs[None]})[0], dtype=np.float64).reshape(-1))
+        model = _onnx(session, n_obs, where)
     else:
         raise ConfigError(f"{where}: model.format {fmt!r}: use torchscript, torch.export or onnx")
     try:

@@ -25,7 +25,9 @@ Joint terms read every joint the policy drives, in its order: the leg joints' co
 encoders, and a whole-body policy's other joints (waist, arms: no offsets).
 
 Each term's values are multiplied by its scale (one number or one per value) and then
-clipped to +-clip if given.
+clipped to +-clip if given. With `history: k`, a term gives its last k control steps'
+values, oldest first (after a reset, the first step's values k times: Isaac Lab's
+observation history), k times its size.
 """
 
 from __future__ import annotations
@@ -138,6 +140,7 @@ class BoundTerm:
     stop_at_zero_command: bool = False
     name: str | None = None
     size: int | None = None
+    history: int = 1
 
 
 def bind(spec) -> list[BoundTerm]:
@@ -145,21 +148,27 @@ def bind(spec) -> list[BoundTerm]:
     for t in spec.observation:
         mi = None if t.mask is None else np.array([spec.joints.index(j) for j in t.mask])
         out.append(BoundTerm(t.term, np.asarray(t.scale, dtype=float), t.clip, t.mask, mi, t.period, t.offsets,
-                             t.frequency, t.initial, t.layout, t.stop_at_zero_command, t.name, t.size))
+                             t.frequency, t.initial, t.layout, t.stop_at_zero_command, t.name, t.size, t.history))
     return out
 
 
 def observation_size(spec, terms=None) -> int:
     n = len(spec.joints)
-    return int(sum(TERMS[t.term].size(n, t) for t in (spec.observation if terms is None else terms)))
+    return int(sum(TERMS[t.term].size(n, t) * t.history for t in (spec.observation if terms is None else terms)))
 
 
-def build_observation(terms: list[BoundTerm], ctx: ObsContext) -> np.ndarray:
-    """The policy's observation vector (float32): each term scaled, then clipped."""
+def build_observation(terms: list[BoundTerm], ctx: ObsContext, history: list | None = None) -> np.ndarray:
+    """The policy's observation vector (float32): each term scaled, then clipped; a
+    term with `history` > 1 gives its last values from `history` (one list per term,
+    the caller's memory: empty after a reset), oldest first."""
     parts = []
-    for t in terms:
+    for k, t in enumerate(terms):
         v = np.multiply(TERMS[t.term].read(ctx, t), t.scale, dtype=float)
         if t.clip is not None:  # np.clip's arithmetic (max, then min), without its wrapper
             v = np.minimum(np.maximum(v, -t.clip), t.clip)
+        if t.history > 1:
+            past = history[k]
+            past[:] = (past or [v] * (t.history - 1))[-(t.history - 1):] + [v]
+            v = np.concatenate(past)
         parts.append(v)
     return np.concatenate(parts).astype(np.float32)

@@ -60,6 +60,7 @@ class PolicyRunner:
         self.n_body = legmap.n_joints + len(self.extra)
         self.hold_q = np.array([h.q for h in self.spec.hold])
         self.target_range = _joint_ranges(self.spec, legmap, self.extra) if self.spec.action_clip_range else None
+        self.history: list[list] = [[] for _ in self.terms]  # terms with a history: their last values
 
     @property
     def name(self) -> str:
@@ -71,11 +72,14 @@ class PolicyRunner:
 
     def reset(self) -> None:
         self.last_action = np.zeros(len(self.spec.joints))
+        self.history = [[] for _ in self.terms]
         getattr(self.model, "reset", lambda: None)()
 
     def observation(self, obs: dict, info: dict, time: float) -> np.ndarray:
+        if self.spec.command_schedule:
+            self.command = np.asarray(self.spec.command_at(time), dtype=float)
         return build_observation(self.terms, ObsContext(obs, info, time, self.last_action, self.command, self.index,
-                                                        self.default_q))
+                                                        self.default_q), self.history)
 
     def act(self, obs: dict, info: dict, time: float) -> np.ndarray:
         """Joint targets (one per leg joint, leg-map order, rad) for this control step."""

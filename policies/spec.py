@@ -57,6 +57,7 @@ class ObsTerm:
     stop_at_zero_command: bool = False
     name: str | None = None  # sensor: the MJCF sensor's name
     size: int | None = None  # sensor: its values
+    history: int = 1  # the last `history` control steps' values, oldest first (the first repeated after reset)
 
 
 @dataclass(frozen=True)
@@ -95,10 +96,37 @@ class PolicySpec:
     action_clip_range: bool = False  # clip the joint targets to the joints' ranges (the MJCF's)
     floor_friction: tuple[float, float, float] | None = None  # sliding, torsional, rolling
     keyframe: str | int | None = None  # the MJCF keyframe the robot starts from
+    # (time s, command) pairs, times increasing from 0: the command from each time on
+    # (`command` when empty).
+    command_schedule: tuple[tuple[float, tuple[float, float, float]], ...] = ()
+
+    def command_at(self, t: float) -> tuple[float, float, float]:
+        """The command at time `t` since reset."""
+        out = self.command
+        for start, command in self.command_schedule:
+            if t + 1e-9 < start:
+                break
+            out = command
+        return out
 
     @property
     def decimation(self) -> int:
         return int(round(self.physics_hz / self.control_hz))
+
+    @property
+    def settings(self) -> str:
+        """The simulation settings the spec gives the walking env, in words (every result
+        states them)."""
+        parts = [f"{len(self.joints)} joints driven" + (f", {len(self.hold)} held" if self.hold else ""),
+                 "the model's own actuators" if self.actuators == "model" else "PD servos",
+                 f"physics {self.physics_hz:g} Hz, control {self.control_hz:g} Hz"]
+        if self.floor_friction is not None:
+            parts.append(f"floor friction {self.floor_friction[0]:g}")
+        if self.keyframe is not None:
+            parts.append(f"starting from keyframe {self.keyframe!r}")
+        if self.command_schedule:
+            parts.append("commands " + ", ".join(f"{list(c)} from {t:g} s" for t, c in self.command_schedule))
+        return "; ".join(parts)
 
     @property
     def privileged(self) -> list[str]:
@@ -178,7 +206,7 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
         raise ConfigError(f"{w}: field 'format' must be {SPEC_FORMAT!r} (see legcal_bench/policies/spec.py)")
     known = {"format", "name", "model", "joints", "default_q", "action", "pd", "rates", "command", "observation",
-             "notes", "hold", "actuators", "sim"}
+             "notes", "hold", "actuators", "sim", "command_schedule"}
     unknown = set(doc) - known
     if unknown:
         raise ConfigError(f"{w}: unknown fields {sorted(unknown)}; known: {sorted(known)}")
@@ -247,6 +275,15 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
         raise ConfigError(f"{w}: rates: physics_hz ({physics_hz:g}) must be a whole multiple of control_hz "
                           f"({control_hz:g})")
     command = _numbers(doc.get("command", [0.0, 0.0, 0.0]), 3, f"{w}: command [vx m/s, vy m/s, yaw rate rad/s]")
+    schedule = []
+    for i, e in enumerate(doc.get("command_schedule") or []):
+        where = f"{w}: command_schedule[{i}]"
+        if not isinstance(e, dict) or set(e) != {"t", "command"}:
+            raise ConfigError(f"{where}: give {{t: <s since reset>, command: [vx, vy, yaw rate]}}")
+        t_i = _numbers(e["t"], 1, f"{where}.t (s)", True)[0]
+        if schedule and t_i <= schedule[-1][0]:
+            raise ConfigError(f"{where}.t: times must increase ({t_i:g} after {schedule[-1][0]:g})")
+        schedule.append((t_i, _numbers(e["command"], 3, f"{where}.command [vx, vy, yaw rate]")))
     obs = doc.get("observation")
     if not isinstance(obs, list) or not obs:
         raise ConfigError(f"{w}: field 'observation' must list the observation terms in order (terms: "
@@ -257,7 +294,7 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
         if not isinstance(t, dict) or t.get("term") not in TERMS:
             raise ConfigError(f"{wt}: 'term' must be one of {list(TERMS)}, got {t!r}")
         extra = set(t) - {"term", "scale", "clip", "mask", "period", "offsets", "frequency", "initial", "layout",
-                          "stop_at_zero_command", "name", "size"}
+                          "stop_at_zero_command", "name", "size", "history"}
         if extra:
             raise ConfigError(f"{wt}: unknown keys {sorted(extra)}")
         gait = {}
@@ -274,6 +311,11 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
                 raise ConfigError(f"{wt}: term sensor needs 'name' (an MJCF sensor of the robot) and 'size' (its "
                                   "values, e.g. 3)")
             gait.update(name=t["name"], size=t["size"])
+        history = t.get("history", 1)
+        if isinstance(history, bool) or not isinstance(history, int) or history < 1:
+            raise ConfigError(f"{wt}: history must be a whole number of control steps >= 1 (the last k frames of "
+                              f"the term, oldest first), got {history!r}")
+        gait["history"] = history
         mask = t.get("mask")
         if mask is not None:
             if not TERMS[t["term"]].per_joint:
@@ -296,7 +338,7 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     spec = PolicySpec(str(doc.get("name", path.stem)), path, model_file, fmt, tuple(joints), default_q, scale, clip,
                       kp, kd, tl, physics_hz, control_hz, command, tuple(terms), doc.get("notes") or {},
                       hold=hold, actuators=actuators, action_clip_joints=clip_joints, action_clip_range=clip_range,
-                      floor_friction=friction, keyframe=keyframe)
+                      floor_friction=friction, keyframe=keyframe, command_schedule=tuple(schedule))
     from legcal_bench.policies.observation import observation_size
 
     for i, t in enumerate(spec.observation):

@@ -101,6 +101,8 @@ def cmd_walk(a: argparse.Namespace) -> int:
           f"torque {w.torque_mean:.1f} N m, power {w.power_mean:.0f} W; {w.wall_s:.2f} s wall ({code})")
     if w.privileged:
         print(f"  the policy read privileged observation terms from the simulator: {', '.join(w.privileged)}")
+    if getattr(runner, "spec", None) is not None:
+        print(f"  simulation settings from the spec: {runner.spec.settings}")
     if "strip" in s:
         print(f"wrote {s['strip']}")
     return 0

@@ -248,6 +248,9 @@ def write(out: str | Path, summaries: list[dict], trials: list[list[dict]], code
          f"{cfg['options'] or '(defaults)'}. Deviations against the same seed's nominal walk; trials where a walk fell "
          "are left out of the RMS and counted in 'upright'. Wall-clock times per trial are in `timings.json` beside "
          "this report, not in it: a run resumed from its finished trials (`trials/`) writes this report unchanged."]
+    from legcal_bench.policies.spec import load_policy_spec
+
+    L += ["", f"Simulation settings from the policy's spec: {load_policy_spec(cfg['policy']).settings}."]
     if summaries[0]["privileged"]:
         L += ["", f"The policy reads privileged observation terms from the simulator: {summaries[0]['privileged']}."]
     plots = []

@@ -22,6 +22,13 @@ realized mounting tilt), the gravity direction from an orientation filter on the
 (`GravityFilter`, in the base frame through the nominal IMU mount: a mounting tilt is
 seen as a tilt of the robot), and the ankle force/torque where the leg map has them.
 
+A whole-body policy (`WalkingConfig.extra_joints`) drives the robot's other joints too
+(waist, arms; no offsets on them), with PD servos or, with `model_actuators`, the MJCF's
+own actuators; joints a leg map holds (`held_joints_rad`) are released when driven.
+A spec's training settings enter here: the floor's friction (`floor_friction_exact`: the
+floor geom's priority makes it the contacts'), the MJCF keyframe to start from, and the
+MJCF sensors its privileged terms read (`sensor_readings`).
+
 Ground truth (`truth`): pelvis pose, joint torques and mechanical power, each foot's
 vertical contact load, foot strikes (a touchdown is the load of a foot rising above
 `TOUCHDOWN_FRACTION` of the robot's weight after it was below `LIFTOFF_FRACTION`; its
