@@ -103,6 +103,20 @@ def _walks_table(w: dict) -> list[str]:
     return L
 
 
+def rules_text(report: dict) -> str:
+    """The selection's decision rules in words (the report's JSON keeps them as numbers)."""
+    r = report["rules"]
+    per_parameter = float(np.log(r["n_rows"]))
+    return (f"Decision rules: an effect is kept only if its chi2 drop exceeds k ln(n_rows) = k x {per_parameter:.1f} "
+            f"(the BIC penalty, k its parameters, {r['n_rows']} rows), the fit with it predicts each stance left out "
+            f"of the fit better (leave-one-stance-out cross-validation), and it moves some offset by more than "
+            f"{r['move_sigmas']:g} noise-only standard deviations. Candidates within {r['ambiguous_bic']:g} of BIC "
+            f"of each other are reported as ambiguous; at most {r['max_effects']} effects are kept; a fit that "
+            "leaves the residual significant, with a leg or IMU location test significant on it, is a poor fit "
+            f"(set aside). The residual is tested at a false-alarm rate of {report['alpha']:g} in all (each test at "
+            f"{report['alpha'] / 2:g}).")
+
+
 def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: dict | None = None) -> str:
     d, a = report["detection"], report["after"]
     L = [f"# Model-gap diagnosis: {report['verdict']}", "", f"Made by `{made_by}` ({code}).", "",
@@ -124,7 +138,7 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
     if hh:
         L.append(f"| held-out foot height RMS ({hh['postures']} postures, mm) | {hh['before']:.4f} | "
                  f"{hh['after']:.4f} |")
-    L += ["", f"Decision rules: {report['rules']}; detection at alpha = {report['alpha']}.", ""]
+    L += ["", rules_text(report), ""]
     nz = report.get("noise")
     if nz:
         meas = "–" if nz["tilt_measured_rad"] is None else f"{nz['tilt_measured_rad'] * 1e3:.3f}"
@@ -149,8 +163,10 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
                      f"{c['max_offset_move_sigmas']:.1f} |")
         L.append("")
     t = report["tracing"]
-    L += ["## Tracing (offsets-only residual)", "", f"Localization: **{t['localization']['location']}**, "
-          f"channel **{t['localization']['channel']}**.", "", "| channel | chi2 / expected |", "|---|---|"]
+    where = ("Localization: none: the offsets explain these data within the declared noise (the tables below "
+             "are the residual's shares, not a finding)." if report["verdict"] == "explained" else
+             f"Localization: **{t['localization']['location']}**, channel **{t['localization']['channel']}**.")
+    L += ["## Tracing (offsets-only residual)", "", where, "", "| channel | chi2 / expected |", "|---|---|"]
     L += [f"| {c} | {v['ratio']:.3f} |" for c, v in t["channels"].items()]
     L += ["", "| location | delta chi2 | dof |", "|---|---|---|"]
     L += [f"| {c} | {v['delta_chi2']:.1f} | {v['dof']} |" for c, v in t["locations"].items()]

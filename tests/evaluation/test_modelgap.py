@@ -31,6 +31,12 @@ def test_clean_data_are_explained_by_the_offsets(tmp_path):
     assert nz["tilt_used_rad"] == max(nz["tilt_measured_rad"], nz["tilt_declared_rad"])
     # IMU pitch on a pitch-first hip: reported as confounded, computed.
     assert any("hip_pitch" in c["offsets"] and c["effect"] == "imu_tilt" for c in rep["confounded"])
+    # The report: no localization claimed on explained data, the rules in words (issue #41).
+    from legcal_bench.reports.diagnose import markdown
+
+    text = markdown(rep, "test", "code", None)
+    assert "Localization: none" in text and "**" + rep["tracing"]["localization"]["location"] + "**" not in text
+    assert "Decision rules: an effect is kept only if" in text and "{'bic'" not in text
 
 
 def test_a_knee_encoder_scale_is_detected_and_named(tmp_path):
