@@ -146,6 +146,9 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
               f"{nz['tilt_used_rad'] * 1e3:.3f} mrad per axis (declared {nz['tilt_declared_rad'] * 1e3:.3f}, "
               f"measured from the data {meas}: the larger is used).", ""]
     if report["parameters"]:
+        if report.get("poor_fit"):
+            L += [f"Set aside, not a result: the fit with {' + '.join(report['poor_fit'])} left the residual "
+                  "significant and structured (a poor fit); its parameters, for reference:", ""]
         L += ["| parameter | value | std | unit |", "|---|---|---|---|"]
         for n, p in report["parameters"].items():
             L.append(f"| {n} | {p['value']:.4g} | {p['std']:.2g} | {p['unit']}{' (held: confounded)' if p['held'] else ''} |")
@@ -183,7 +186,7 @@ def plot(report: dict, path: Path) -> Path:
     fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
     tr = [("offsets only", report["tracing"])]
     if report.get("tracing_after"):
-        tr.append(("after", report["tracing_after"]))
+        tr.append(("after (set aside: a poor fit)" if report.get("poor_fit") else "after", report["tracing_after"]))
     top: list[str] = []  # the offsets-only fit's strongest signatures, shown for both fits
     for k, (label, t) in enumerate(tr):
         w = 0.4
@@ -209,7 +212,11 @@ def plot(report: dict, path: Path) -> Path:
     axes[2].set_title("where: excess chi2 explained (score test)", fontsize=9)
     axes[3].set_xscale("log")
     axes[3].set_title("signatures: excess chi2 (score test)", fontsize=9)
-    axes[0].legend(fontsize=7)
-    fig.suptitle(report["summary"][:160], fontsize=8)
-    fig.tight_layout()
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=7, frameon=False)  # clear of the bars
+    import textwrap
+
+    title = textwrap.wrap(report["summary"], 170)
+    fig.suptitle("\n".join(title[:3]) + (" ..." if len(title) > 3 else ""), fontsize=8)
+    fig.tight_layout(rect=(0, 0.06, 1, 1 - 0.04 * min(len(title), 3)))
     return save_figure(fig, path)
