@@ -398,13 +398,23 @@ def summary_line(rep: dict) -> str:
     if v == "unexplained":
         poor = (f"; {' + '.join(rep['poor_fit'])} fit poorly (leaves {rep['after']['share_of_excess_left']:.0%} "
                 "of the excess, a leg or IMU error still explains it)") if rep["poor_fit"] else ""
-        return (f"unexplained residual ({head}); no library effect explains it{poor}; it lives in the "
-                f"{where['location']} ({where['channel']} rows)")
+        return (f"unexplained residual ({head}); no library effect explains it{poor}; {where_text(where)} "
+                f"({where['channel']} rows){_signature_text(rep['tracing'])}")
     if v == "ambiguous":
         return (f"ambiguous: {' or '.join(a['effect'] for a in rep['ambiguous'])} explain it about equally ({head});"
                 f" to tell them apart: {'; '.join(dict.fromkeys(a['remedy'] for a in rep['ambiguous']))}")
     a = rep["after"]
     return (f"{v}: {' + '.join(rep['selected'])} ({head} -> {a['chi2_per_dof']:.3f}, p = {a['p_value']:.2g})")
+
+
+def _signature_text(tracing: dict) -> str:
+    """The signature that explains the most of the residual (angle, load, motion, time), in words."""
+    best = max(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs),
+               key=lambda fs: fs[1]["excess"], default=None)
+    if best is None or best[1]["excess"] <= 0:
+        return ""
+    fam, sig = best
+    return f"; its strongest signature: {fam} of {sig['joint'].replace('_joint', '')} (excess chi2 {sig['excess']:.0f})"
 
 
 def trace(ctx: Context, ev: Evaluated) -> dict:
@@ -461,13 +471,34 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     d, dof = score_beyond(zr, Qn, whiten(time_columns(fr.segment, t)), ctx.resolution)
     out["signatures"]["time"] = [{"joint": "(every row, per segment)", "delta_chi2": d, "dof": dof,
                                   "excess": d - dof, "log10_p": _log10_sf(d, dof)}]
-    # The location explaining the most beyond what its parameters would take from noise.
-    loc = max(out["locations"], key=lambda k: out["locations"][k]["excess"])
     chan = max(out["channels"], key=lambda k: out["channels"][k]["ratio"])
-    out["localization"] = {"location": loc, "channel": chan,
-                           "log10_p": out["locations"][loc]["log10_p"],
+    out["localization"] = {**localize(out["locations"]), "channel": chan,
                            "channel_ratio": out["channels"][chan]["ratio"]}
     return out
+
+
+def localize(locations: dict) -> dict:
+    """The location explaining the most beyond what its parameters would take from noise,
+    and the locations it cannot be told from: those whose excess is within
+    `AMBIGUOUS_BIC` of it (the selection's decisive margin; the same number of
+    parameters on each side). The two legs' generic geometries often tie: moving one
+    hip's mounting point by +d is, in inter-foot data, moving the other's by -d."""
+    best = max(locations, key=lambda k: locations[k]["excess"])
+    ties = [k for k in locations if k != best and locations[best]["excess"] - locations[k]["excess"] < AMBIGUOUS_BIC]
+    return {"location": best, "log10_p": locations[best]["log10_p"], "tied_with": ties,
+            "margin": min((locations[best]["excess"] - locations[k]["excess"] for k in locations if k != best),
+                          default=float("inf"))}
+
+
+def where_text(where: dict) -> str:
+    """The localization in words: a location, or a tie and why it cannot be broken."""
+    if not where.get("tied_with"):
+        return f"it lives in the {where['location']} (by {where['margin']:.0f} of chi2 over the next location)"
+    places = " or ".join([where["location"], *where["tied_with"]])
+    legs = all(p.endswith("leg") for p in [where["location"], *where["tied_with"]])
+    return (f"it lives in the {places}: a tie (chi2 within {AMBIGUOUS_BIC:g} of each other)"
+            + ("; the data cannot tell the legs apart: moving one hip's mounting by +d is, in inter-foot data, "
+               "moving the other's by -d" if legs else ""))
 
 
 def _structured(tracing: dict) -> bool:

@@ -103,6 +103,12 @@ def _walks_table(w: dict) -> list[str]:
     return L
 
 
+def where_text(localization: dict) -> str:
+    from legcal_bench.evaluation.modelgap import where_text as words
+
+    return words(localization)
+
+
 def rules_text(report: dict) -> str:
     """The selection's decision rules in words (the report's JSON keeps them as numbers)."""
     r = report["rules"]
@@ -168,7 +174,7 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
     t = report["tracing"]
     where = ("Localization: none: the offsets explain these data within the declared noise (the tables below "
              "are the residual's shares, not a finding)." if report["verdict"] == "explained" else
-             f"Localization: **{t['localization']['location']}**, channel **{t['localization']['channel']}**.")
+             f"Localization: {where_text(t['localization'])}; channel **{t['localization']['channel']}**.")
     L += ["## Tracing (offsets-only residual)", "", where, "", "| channel | chi2 / expected |", "|---|---|"]
     L += [f"| {c} | {v['ratio']:.3f} |" for c, v in t["channels"].items()]
     L += ["", "| location | delta chi2 | dof |", "|---|---|---|"]

@@ -140,3 +140,21 @@ def test_the_confounds_of_each_candidate_from_one_evaluation_match_each_alone(tm
         for p, v in alone["parameters"].items():
             np.testing.assert_allclose(got["parameters"][p]["sine_to_all_others"], v["sine_to_all_others"],
                                        rtol=1e-6, atol=1e-12)
+
+
+def test_a_tie_between_the_legs_is_reported_as_a_tie_with_its_reason():
+    """Localization only where the data separate the locations (issue #41): excesses within
+    the decisive margin are a tie, and a tie between the legs says why it cannot break."""
+    from legcal_bench.evaluation.modelgap import AMBIGUOUS_BIC, localize, where_text
+
+    def locs(left, right, imu):
+        return {k: {"excess": v, "log10_p": -v / 10} for k, v in
+                (("left leg", left), ("right leg", right), ("IMU", imu))}
+
+    tie = localize(locs(4000.0, 4000.0 - AMBIGUOUS_BIC / 2, 12.0))
+    assert tie["location"] == "left leg" and tie["tied_with"] == ["right leg"]
+    text = where_text(tie)
+    assert "left leg or right leg: a tie" in text and "+d" in text and "-d" in text
+    clear = localize(locs(3000.0, 4000.0, 12.0))
+    assert clear["location"] == "right leg" and clear["tied_with"] == [] and clear["margin"] == 1000.0
+    assert "tie" not in where_text(clear) and "by 1000 of chi2" in where_text(clear)
