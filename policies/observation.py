@@ -74,7 +74,7 @@ def _joints(values: np.ndarray, ctx: ObsContext, t) -> np.ndarray:
 
 
 def _gait_phase(ctx: ObsContext, t) -> np.ndarray:
-    a = np.asarray(t.initial, dtype=float)
+    a = t.initial
     if not (t.stop_at_zero_command and not np.any(ctx.command)):
         a = a + 2 * np.pi * t.frequency * ctx.time
     c, s = np.cos(a), np.sin(a)
@@ -135,7 +135,7 @@ class BoundTerm:
     period: float | None
     offsets: tuple | None
     frequency: float | None = None
-    initial: tuple | None = None
+    initial: np.ndarray | None = None  # gait_phase: per-foot initial angles (rad)
     layout: str | None = None
     stop_at_zero_command: bool = False
     name: str | None = None
@@ -148,7 +148,8 @@ def bind(spec) -> list[BoundTerm]:
     for t in spec.observation:
         mi = None if t.mask is None else np.array([spec.joints.index(j) for j in t.mask])
         out.append(BoundTerm(t.term, np.asarray(t.scale, dtype=float), t.clip, t.mask, mi, t.period, t.offsets,
-                             t.frequency, t.initial, t.layout, t.stop_at_zero_command, t.name, t.size, t.history))
+                             t.frequency, None if t.initial is None else np.asarray(t.initial, dtype=float),
+                             t.layout, t.stop_at_zero_command, t.name, t.size, t.history))
     return out
 
 

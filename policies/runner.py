@@ -60,6 +60,8 @@ class PolicyRunner:
         self.n_body = legmap.n_joints + len(self.extra)
         self.hold_q = np.array([h.q for h in self.spec.hold])
         self.target_range = _joint_ranges(self.spec, legmap, self.extra) if self.spec.action_clip_range else None
+        self.clip_joints = (None if self.spec.action_clip_joints is None
+                            else np.asarray(self.spec.action_clip_joints))
         self.history: list[list] = [[] for _ in self.terms]  # terms with a history: their last values
 
     @property
@@ -90,9 +92,8 @@ class PolicyRunner:
         action; the joint targets in leg-map order."""
         a = action if self.spec.action_clip is None else np.clip(action, -self.spec.action_clip,
                                                                   self.spec.action_clip)
-        if self.spec.action_clip_joints is not None:
-            bound = np.asarray(self.spec.action_clip_joints)
-            a = np.clip(a, -bound, bound)
+        if self.clip_joints is not None:
+            a = np.clip(a, -self.clip_joints, self.clip_joints)
         self.last_action = a
         target = np.empty(self.n_body)
         target[self.index] = self.default_q + self.spec.action_scale * a

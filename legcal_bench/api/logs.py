@@ -50,17 +50,9 @@ def simulate_log(robot: str, out: str | Path, fmt: str = "mcap", seed: int = 0, 
             "robot": legmap.name, "seed": seed, "sensors": sensors, "convention": "q = q_enc + offset",
             "offsets_rad": dict(zip(legmap.joint_names, map(float, log.offsets))),
             "offsets_deg": dict(zip(legmap.joint_names, map(float, np.rad2deg(log.offsets)))),
-            "labels": _label_spans(log.time, log.labels)})
+            "labels": [{"label": label, "t0": float(log.time[a]), "t1": float(log.time[b - 1])}
+                       for label, a, b in log.segments()]})
 
     atomic_write_dir(out, write)
     return {"log": str(out / name), "mapping": str(out / "mapping.yaml"), "truth": str(out / "truth.json")}
 
-
-def _label_spans(t: np.ndarray, labels: np.ndarray) -> list[dict]:
-    out = []
-    start = 0
-    for i in range(1, len(labels) + 1):
-        if i == len(labels) or labels[i] != labels[start]:
-            out.append({"label": str(labels[start]), "t0": float(t[start]), "t1": float(t[i - 1])})
-            start = i
-    return out

@@ -46,8 +46,8 @@ REASONS = {
     "spread": "the feet crept during the run (inter-foot spread too large)",
     "excluded": "outside the user's time ranges",
 }
-KNEE_STRAIGHT_TOL_RAD = 0.1
-RANGE_SLACK_S = 1e-6  # a user's range includes frames stamped this close outside it (stamps in ns, ranges in s)  # a held posture whose knees read within this of straight is the standing phase
+KNEE_STRAIGHT_TOL_RAD = 0.1  # a held posture whose knees read within this of straight is the standing phase
+RANGE_SLACK_S = 1e-6  # a user's range includes frames stamped this close outside it (stamps in ns, ranges in s)
 
 
 @dataclass
@@ -125,7 +125,7 @@ def frame_signals(a: Aligned, kin: LegKinematics, det: Detection) -> dict:
     tilt = np.arccos(np.clip(np.einsum("ni,ni->n", TL[:, :3, 2], TR[:, :3, 2]), -1.0, 1.0))
     height = np.einsum("ni,ni->n", TR[:, :3, 3] - TL[:, :3, 3], up_B)
     out = {"time": t, "speed": speed, "turn": turn, "gyro": gyro, "acc_dev": np.abs(np.linalg.norm(acc, axis=1) - G),
-           "tilt": tilt, "height": height, "p_interfoot": p}
+           "tilt": tilt, "height": height, "p_interfoot": p, "T_left": TL}
     if a.ft is not None:
         f = np.linalg.norm(a.ft[:, :, :3], axis=2)
         out["load"] = f / np.maximum(f.sum(axis=1, keepdims=True), 1e-9)
@@ -154,13 +154,11 @@ def refusals(s: dict, a: Aligned, det: Detection) -> np.ndarray:
     return reason
 
 
-def _posture_range(kin: LegKinematics, q: np.ndarray) -> tuple[float, float]:
-    TL, _ = kin.sole_poses_batch(q)
+def _posture_range(TL: np.ndarray) -> tuple[float, float]:
+    """How far the pelvis moves over a segment (the left sole's poses in the pelvis frame, (N, 4, 4))."""
     T = np.linalg.inv(TL)  # the pelvis in the left sole's frame
-    p = T[:, :3, 3]
-    lo, hi = np.percentile(p, [5, 95], axis=0)
     ang = _angle(T[:, :3, :3], np.broadcast_to(T[len(T) // 2, :3, :3], T[:, :3, :3].shape))
-    return float(np.linalg.norm(hi - lo)), float(np.percentile(ang, 95) * 2)
+    return _spread(T[:, :3, 3]), float(np.percentile(ang, 95) * 2)
 
 
 def _spread(p: np.ndarray) -> float:
@@ -205,7 +203,7 @@ def detect(a: Aligned, kin: LegKinematics, det: Detection, knee_idx: list[int], 
     segments = []
     for i, j, how in candidates:
         q = a.q_enc[i:j]
-        pm, pr = _posture_range(kin, q)
+        pm, pr = _posture_range(s["T_left"][i:j])
         held = pm < det.posture_m and pr < det.posture_rad
         straight = knee_idx and np.abs(np.median(q[:, knee_idx], axis=0) - knee_straight).max() < KNEE_STRAIGHT_TOL_RAD
         kind = "standing" if held and straight else "stance"

@@ -129,7 +129,8 @@ def import_log(logs: list[str | Path], map_path: str | Path, legmap: LegMap, out
             r.save(folder / f"{r.name}.npz")
         write_manifest(folder, manifest)
         if plot:
-            plot_timeline(found, aligned, folder / TIMELINE_PNG, f"{legmap.name}: {', '.join(p.name for p in logs)}")
+            plot_timeline(found, aligned, folder / TIMELINE_PNG, f"{legmap.name}: {', '.join(p.name for p in logs)}",
+                          spans)
 
     replace_dir(out, write, keep_if=is_session_dir)
     return summary

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.files.plots import pyplot, save_figure
-from legcal_bench.logs.detect import REASONS, Detected
+from legcal_bench.logs.detect import REASONS, Detected, _runs
 
 MERGE_S = 0.2  # refusals shorter than this are folded into their neighbour in the text
 
@@ -66,7 +66,8 @@ _COLORS = {"gap": "#000000", "unloaded": "#d62728", "not_flat": "#ff7f0e", "feet
 _KIND_COLORS = {"standing": "#1f77b4", "stance": "#2ca02c", "heldout": "#17becf"}
 
 
-def plot_timeline(found: Detected, aligned, path: Path, title: str) -> Path:
+def plot_timeline(found: Detected, aligned, path: Path, title: str, spans: list[dict] | None = None) -> Path:
+    """The timeline's figure; `spans`: `intervals(aligned.time, found)` if already made."""
     plt = pyplot()
     s, t = found.traces, aligned.time
     step = max(1, len(t) // 4000)  # enough points for the eye
@@ -93,7 +94,7 @@ def plot_timeline(found: Detected, aligned, path: Path, title: str) -> Path:
     ax[2].plot(t[::step], s["acc_dev"][::step], lw=0.8, label="| |f| - g | (m/s^2)")
     ax[2].set_ylabel("pelvis IMU")
     ax[2].legend(loc="upper right", fontsize=7)
-    for iv in intervals(t, found):
+    for iv in spans if spans is not None else intervals(t, found):
         if iv["taken"]:
             c = _KIND_COLORS.get(iv["kind"], "#2ca02c")
             ax[3].axvspan(iv["t0"], iv["t1"], color=c, lw=0)
@@ -104,7 +105,7 @@ def plot_timeline(found: Detected, aligned, path: Path, title: str) -> Path:
     for key, color in _COLORS.items():
         m = found.reason == key
         if m.any():
-            for i, j in zip(*_edges(m)):
+            for i, j in _runs(m):
                 ax[3].axvspan(t[i], t[j - 1], ymin=0.0, ymax=0.35, color=color, lw=0)
     handles = [plt.Rectangle((0, 0), 1, 1, color=c) for c in _KIND_COLORS.values()]
     names = list(_KIND_COLORS)
@@ -120,7 +121,3 @@ def plot_timeline(found: Detected, aligned, path: Path, title: str) -> Path:
     fig.tight_layout(rect=(0, 0.08, 1, 0.97))
     return save_figure(fig, path)
 
-
-def _edges(mask: np.ndarray):
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    return np.flatnonzero(d == 1), np.flatnonzero(d == -1)

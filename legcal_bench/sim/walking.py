@@ -231,6 +231,7 @@ class WalkingSim:
         self.body_dof = np.r_[sc.dof_adr, [m.jnt_dofadr[j] for j in extra]].astype(int)
         self._n_extra = len(extra)
         self.body_act = _body_actuators(m, self.body_qpos) if (config.model_actuators or extra) else None
+        self._ctrl_idx = sc.servo[0] if self.body_act is None else self.body_act  # the driven joints' ctrl
         if self.body_act is not None and (self.body_act < 0).any():
             raise ConfigError(f"walking config: joints {[n for n, a in zip(legmap.joint_names + list(config.extra_joints), self.body_act) if a < 0]} have no actuator")
         self._sensor_adr = {}
@@ -322,16 +323,13 @@ class WalkingSim:
         return target + self.offsets - self.correction
 
     def _ctrl(self, target: np.ndarray) -> None:
-        self.data.ctrl[self.scene.servo[0] if self.body_act is None else self.body_act] = self._true_target(target)
+        self.data.ctrl[self._ctrl_idx] = self._true_target(target)
 
     def step(self, target: np.ndarray) -> None:
         """Hold `target` (encoder space, corrected; the leg joints, then a whole-body
         policy's others) for one control step."""
         m, d, cfg = self.model, self.data, self.config
-        if self.body_act is None:
-            d.ctrl[self.scene.servo[0]] = target + self.offsets - self.correction  # `_true_target`
-        else:
-            d.ctrl[self.body_act] = self._true_target(target)
+        d.ctrl[self._ctrl_idx] = self._true_target(target)
         mujoco.mj_step(m, d, nstep=cfg.decimation)
         self.time += cfg.control_dt
         # The IMU's rate and specific force averaged over the step (a high-rate filter's input).
@@ -375,7 +373,7 @@ class WalkingSim:
                                          noise[at["imu"].stop:at["imu"].stop + 12].reshape(2, 6))
         if self._n_extra:  # a whole-body policy's other joints: encoders without offsets
             ne, ex = self._n_extra, noise[at["extra"]]
-            obs["q_extra"] = sen.encoders(d.qpos[self.body_qpos[-ne:]], rng, ex[:ne]) if ne else np.zeros(0)
+            obs["q_extra"] = sen.encoders(d.qpos[self.body_qpos[-ne:]], rng, ex[:ne])
             obs["dq_extra"] = d.qvel[self.body_dof[-ne:]] + self._dq_sigma * ex[ne:]
         return obs
 
