@@ -39,7 +39,7 @@ segment) by score tests (`legcal_bench.estimation.modelgap.lineartests`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.stats import chi2 as chi2_dist
@@ -47,8 +47,9 @@ from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry
-from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, score_beyond
-from legcal_bench.estimation.modelgap.signatures import FAMILIES, LegGeometry, joint_columns, project_means, time_columns
+from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, identifiable, score_beyond
+from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
+                                                         joint_columns, project_means, time_columns)
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
@@ -116,9 +117,10 @@ def _free_columns(fit) -> list[int]:
     return [i for i in range(fit.model.n) if i not in held]
 
 
-def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -> Evaluated:
+def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False, at_step: bool = True) -> Evaluated:
     """Whitened residual of `segments` at `fit` and the chi-square after one whitened
-    Gauss-Newton step over the fit's free columns."""
+    Gauss-Newton step over the fit's free columns (`at_step`; else the chi-square at
+    `fit` itself, |z|^2)."""
     fr = frame_residuals(ctx.prep, fit, segments, extra)
     cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
     W, rank = whitening(cov)
@@ -126,8 +128,133 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False) -
     z, Jw = whitened_system(fr.r, fr.J[:, :, free], W)
     step = np.linalg.lstsq(Jw, z, rcond=None)[0]
     n_seg = len(np.unique(fr.segment))
-    return Evaluated(fit, z, Jw, chi2_after(z, Jw), int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
+    return Evaluated(fit, z, Jw, chi2_after(z, Jw) if at_step else float(z @ z),
+                     int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
                      *((fr, W, cov, rank) if keep_frames else ()))
+
+
+POLISH_MAX_STEPS = 12
+POLISH_RTOL = 1e-9  # converged when one more step would lower the chi-square by less than this fraction
+
+
+class NestedFitError(RuntimeError):
+    """A model fitted with more parameters ended above the model it extends: a bug in
+    the fit, not in the data (the extended fit starts at the smaller one's optimum and
+    only ever steps downhill)."""
+
+
+def polish(ctx: Context, fit) -> Evaluated:
+    """The fit's model at its whitened optimum over every training frame: Gauss-Newton
+    steps of the noise-whitened problem (the generalized least squares) from `fit`, each
+    step halved until the chi-square goes down, so that it never goes up. Returns the
+    evaluation there (frames kept; `chi2` is |z|^2 at the point, `fit` the polished
+    fit). Every model the diagnosis compares is taken to this point: fits that each trim
+    their own frames and stop at their own tolerance are not comparable, and a nested
+    model could end above the model it extends."""
+    segs = ctx.prep.segments
+    free = _free_columns(fit)
+    x = np.array(fit.x, dtype=float)
+    ev = evaluate(ctx, replace(fit, x=x.copy()), segs, keep_frames=True, at_step=False)
+    for _ in range(POLISH_MAX_STEPS):
+        if ev.chi2 - chi2_after(ev.z, ev.Jw) <= POLISH_RTOL * max(ev.chi2, 1.0):
+            break
+        t, better = 1.0, None
+        for _ in range(8):
+            xn = x.copy()
+            xn[free] -= t * ev.step
+            cand = evaluate(ctx, replace(fit, x=xn), segs, keep_frames=True, at_step=False)
+            if cand.chi2 < ev.chi2:
+                better = (xn, cand)
+                break
+            t /= 2
+        if better is None:
+            break
+        x, ev = better
+    return ev
+
+
+def nested(ctx: Context, parent: Evaluated, name: str, held: dict) -> Evaluated:
+    """The parent's model with effect `name` added, polished (`polish`) from the
+    parent's optimum (the new parameters at zero; the parent's held parameters and the
+    new effect's confounded ones, `held[name]`, held); raises `NestedFitError` if it
+    ends above the parent."""
+    pf = parent.fit
+    names = tuple(pf.effects) + (name,)
+    model = effect_model(ctx.prep.kin, names, ctx.prep.segments)
+    x = model.vector(pf.model.values(pf.x))
+    child = ModelFit(names, model, x, pf.q_ref, tuple(pf.held) + tuple(held.get(name, ())), None, pf.segments)
+    ev = polish(ctx, child)
+    if ev.chi2 > parent.chi2 * (1 + 1e-9) + 1e-9:
+        raise NestedFitError(f"the fit with {' + '.join(names)} ended at chi2 {ev.chi2:.6g}, above "
+                             f"{parent.chi2:.6g} of the model it extends ({' + '.join(pf.effects) or 'offsets only'})")
+    return ev
+
+
+def _std(ev: Evaluated) -> np.ndarray:
+    """(n,) noise-only standard deviation of every column of the model at `ev` (NaN for
+    held columns)."""
+    std = np.full(ev.fit.model.n, np.nan)
+    std[_free_columns(ev.fit)] = np.sqrt(np.diag(np.linalg.pinv(ev.Jw.T @ ev.Jw, hermitian=True)))
+    return std
+
+
+ADMISSIBLE_SIGMAS = 3.0  # a value outside its effect's bounds by more than this many stds is inadmissible
+
+
+def inadmissible(ctx: Context, ev: Evaluated, names) -> list[str]:
+    """The fitted parameters of effects `names` outside their declared bounds
+    (`Effect.bounds`) by more than ADMISSIBLE_SIGMAS of their noise, in words."""
+    model, std = ev.fit.model, _std(ev)
+    out = []
+    for e in model.effects:
+        if e.name not in names:
+            continue
+        sl = model.slices[e.name]
+        for (lo, hi), i in zip(e.bounds(ctx.prep.kin), range(sl.start, sl.stop)):
+            v, sd = ev.fit.x[i], (0.0 if np.isnan(std[i]) else std[i])
+            if v < lo - ADMISSIBLE_SIGMAS * sd or v > hi + ADMISSIBLE_SIGMAS * sd:
+                out.append(f"{model.names[i]} = {v:.3g} +- {sd:.2g} {model.units[i]} outside [{lo:.3g}, {hi:.3g}]")
+    return out
+
+
+GENERIC = "generic geometry"
+
+
+def generic_fit(ctx: Context, base: Evaluated) -> dict:
+    """The generic kinematic alternative (`generic_effects`: both legs' full geometry
+    and the IMU's mount) from the offsets-only optimum `base`: its parameters reduced
+    jointly, beyond the offsets, to the combinations these data identify (`identifiable`
+    at tracing's resolution; the others held at zero), then polished. Each family of
+    geometry changes (`GEOMETRY_FAMILIES`) is tested against it: the family's own
+    identifiable columns alone, fitted the same way, against the whole by a
+    likelihood-ratio test at ALPHA (consistent: not rejected)."""
+    effects = generic_effects()
+    model = EffectModel(ctx.prep.kin, effects)
+    bf = base.fit
+    names = tuple(e.name for e in effects)
+    start = ModelFit(names, model, model.vector({"offsets": bf.x[:model.n_offsets]}), bf.q_ref, (), None,
+                     bf.segments)
+    at0 = evaluate(ctx, start, ctx.prep.segments)
+    n_q = model.n_offsets
+    keep = identifiable(at0.Jw[:, :n_q], at0.Jw[:, n_q:], ctx.resolution) + n_q
+    held = tuple(model.names[i] for i in range(n_q, model.n) if i not in set(keep))
+    ev = polish(ctx, replace(start, held=held))
+    # Each family alone: the offsets and the family's own parameters, reduced by
+    # themselves (a family may need a column the whole's reduction dropped for an
+    # equivalent one of another family, e.g. the other leg's), fitted from `base`.
+    families = {}
+    for fam, member in GEOMETRY_FAMILIES.items():
+        cols = np.array([i for i in range(n_q, model.n) if member(model.names[i])], dtype=int)
+        own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], ctx.resolution)] if len(cols) else cols
+        if not len(own):
+            continue
+        f = polish(ctx, replace(start, held=tuple(model.names[i] for i in range(n_q, model.n) if i not in set(own))))
+        d = max(f.chi2 - ev.chi2, 0.0)
+        dof = len(keep) - len(own)
+        p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
+        families[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
+                         "consistent": p >= ALPHA}
+    return {"ev": ev, "parameters": len(keep), "of": model.n - n_q, "families": families}
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
@@ -259,55 +386,61 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     say("offsets-only fit")
     base_fit = fit_model(ctx.prep, start=start)
     n_q = base_fit.model.n_offsets  # the offsets' columns (one per leg joint) lead every model's
-    base = evaluate(ctx, base_fit, ctx.prep.segments, keep_frames=True)
+    base = polish(ctx, base_fit)
     sigma0 = _offsets_sigma(base)
     ln_n = float(np.log(base.n_rows))
     detection = {"chi2": base.chi2, "dof": base.dof, "chi2_per_dof": base.chi2 / base.dof,
                  "z": (base.chi2 - base.dof) / np.sqrt(2 * base.dof), "p_value": base.p_value}
     tried, notes = candidates(ctx, effects)
     steps, selected, ambiguous, confounded = [], [], [], {}
-    current, current_fit = base, base_fit
-    cv_current, cv_dof = None, 0
+    current = base
+    cv_base, cv_dof = None, 0
     if stance_count(ctx) >= 2:
         say("cross-validation (offsets only)")
-        cv_current, cv_dof = _cv(base)
-        detection["cross_validation"] = _gap(cv_current, cv_dof, base)
+        cv_base, cv_dof = _cv(base)
+        detection["cross_validation"] = _gap(cv_base, cv_dof, base)
     else:
         notes.append("cross-validation not run: it needs two stances or more")
+    cv_current = cv_base
     # Selection only once detection finds a residual the offsets do not explain: an
     # effect is not added to data the offsets-only model already fits within the noise.
     significant = _fires(detection)
     if not significant:
         notes.append("selection not run: the offsets-only model explains these data within the declared noise")
     # What these data cannot separate, per candidate, whether or not selection runs.
-    for c in _confound_entries(_confounds_each(ctx, tried, base_fit.x[:n_q])):
+    each = _confounds_each(ctx, tried, base.fit.x[:n_q])
+    for c in _confound_entries(each):
         confounded.setdefault(c["effect"], c)
+    held_by = {n: tuple(h for h in each["held"] if h.startswith(n + ".")) for n in tried}
+    fitted = []  # every admissible model fitted, for the recommendation: (label, ev)
     while significant and len(selected) < MAX_EFFECTS:
         rows = []
         for name in tried:
             if name in selected:
                 continue
             say(f"fit + {name}")
-            fit = fit_model(ctx.prep, tuple(selected) + (name,), dq0=current_fit.x[:n_q])
-            ev = evaluate(ctx, fit, ctx.prep.segments, keep_frames=True)  # the frames: a kept one is traced
+            ev = nested(ctx, current, name, held_by)
             k = ev.k - current.k
             d = current.chi2 - ev.chi2
-            move = np.abs(fit.x[:n_q] - current_fit.x[:n_q]) / sigma0
-            rows.append({"effect": name, "fit": fit, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
+            move = np.abs(ev.fit.x[:n_q] - current.fit.x[:n_q]) / sigma0
+            bad = inadmissible(ctx, ev, [name, *selected])
+            rows.append({"effect": name, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
                          "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
                          "max_offset_move_sigmas": float(move.max()),
-                         "moves_offsets": bool(move.max() > MOVE_SIGMAS)})
+                         "moves_offsets": bool(move.max() > MOVE_SIGMAS),
+                         "admissible": not bad, "inadmissible": bad})
         for r in rows:
             r["passes_cv"] = None
-        passing = [r for r in rows if r["passes_bic"] and r["moves_offsets"]]
+        passing = [r for r in rows if r["passes_bic"] and r["moves_offsets"] and r["admissible"]]
         if passing and cv_current is not None:
             for r in passing:
                 say(f"cross-validation + {r['effect']}")
                 cv, _ = _cv(r["ev"])
                 r["cv_chi2"] = cv
                 r["passes_cv"] = bool(cv < cv_current)
+        fitted += [(" + ".join([*selected, r["effect"]]), r["ev"]) for r in rows if r["admissible"]]
         steps.append({"on_top_of": list(selected), "cv_chi2_current": cv_current,
-                      "candidates": [{k: v for k, v in r.items() if k not in ("fit", "ev")} for r in rows]})
+                      "candidates": [{k: v for k, v in r.items() if k != "ev"} for r in rows]})
         ok = sorted([r for r in passing if r["passes_cv"]], key=lambda r: r["bic"])
         if not ok:
             break
@@ -318,11 +451,11 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
             break
         best = ok[0]
         selected.append(best["effect"])
-        current, current_fit = best["ev"], best["fit"]
+        current = best["ev"]
         cv_current = best["cv_chi2"]
         if current.p_value >= ALPHA / 2:
             break
-    final = current  # evaluated at current_fit over every segment, frames kept
+    final = current  # the selected model at its optimum over every segment, frames kept
     after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
              "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
     if cv_current is not None:
@@ -333,11 +466,37 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     tracing_after = trace(ctx, final) if selected else None
     structured = tracing_after is not None and _structured(tracing_after)
     after["structured_left"] = structured
-    poor_fit = bool(selected) and residual_left and structured
+    set_aside = {}  # effects' label -> why no claim is made on them
+    if selected and residual_left and structured:
+        set_aside[" + ".join(selected)] = "a poor fit: it leaves a significant residual a leg or IMU error still explains"
+    # The generic kinematic alternative: a claim on an effect stands only if it beats it.
+    generic = None
+    if significant:
+        say("fit + generic geometry (both legs and the IMU mount)")
+        generic = generic_fit(ctx, base)
+        g = generic["ev"]
+        generic.update(chi2=g.chi2, dof=g.dof, chi2_per_dof=g.chi2 / g.dof, p_value=g.p_value,
+                       bic=g.chi2 + g.k * ln_n, explains=bool(g.p_value >= ALPHA / 2))
+        if cv_base is not None:
+            generic["cv_chi2"] = _cv(g)[0]
+        fitted.append((GENERIC, g))
+        if selected and not set_aside:
+            margin = generic["bic"] - (final.chi2 + final.k * ln_n)
+            generic["bic_minus_selected"] = float(margin)
+            if margin < -AMBIGUOUS_BIC:
+                set_aside[" + ".join(selected)] = (f"not singled out: a generic geometry change explains the data "
+                                                   f"better (BIC lower by {-margin:.0f})")
+            elif margin < AMBIGUOUS_BIC:
+                ambiguous = [{"effect": " + ".join(selected), "bic_minus_best": max(margin, 0.0),
+                              "remedy": "; ".join(load_effects([e])[0].remedy for e in selected)},
+                             {"effect": GENERIC, "bic_minus_best": max(-margin, 0.0),
+                              "remedy": "a measurement of the leg's geometry (a tape, a motion-capture pose) or "
+                                        "stances that move the effect's signature apart from the geometry's"}]
+    partial = list(selected) if set_aside else []
+    if ambiguous and selected:
+        partial = list(selected)
+    selected = [] if partial else selected
     tracing = trace(ctx, base)
-    partial = []
-    if poor_fit:
-        partial, selected = list(selected), []
     if ambiguous:
         verdict = "ambiguous"
     elif selected:
@@ -348,42 +507,84 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         verdict = "explained"
     params = {}
     if selected or partial:
-        model = current_fit.model
-        free = _free_columns(current_fit)
-        cov = np.linalg.pinv(final.Jw.T @ final.Jw)
-        std = np.full(model.n, np.nan)
-        std[free] = np.sqrt(np.diag(cov))
+        model, std = final.fit.model, _std(final)
         for i in range(n_q, model.n):
-            params[model.names[i]] = {"value": float(current_fit.x[i]), "std": float(std[i]),
-                                      "unit": model.units[i], "held": model.names[i] in current_fit.held}
+            params[model.names[i]] = {"value": float(final.fit.x[i]), "std": float(std[i]),
+                                      "unit": model.units[i], "held": model.names[i] in final.fit.held}
+    cands = _candidates(base, cv_base, fitted, set_aside, selected, names)
+    rec = _recommend(cands, verdict, selected)
     report = {
         "verdict": verdict,
         "selected": selected,
         "poor_fit": partial,
+        "set_aside": [{"effects": k, "why": v} for k, v in set_aside.items()],
         "ambiguous": ambiguous,
         "confounded": list(confounded.values()),
         "detection": detection,
         "after": after,
+        "generic": None if generic is None else {k: v for k, v in generic.items() if k != "ev"},
         "alpha": ALPHA,
         "noise": ctx.noise,
         "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,
-                  "ambiguous_bic": AMBIGUOUS_BIC, "max_effects": MAX_EFFECTS,
+                  "ambiguous_bic": AMBIGUOUS_BIC, "max_effects": MAX_EFFECTS, "admissible_sigmas": ADMISSIBLE_SIGMAS,
                   "poor_fit": "residual left significant and a leg or IMU location test on it at family-wise alpha"},
         "steps": steps,
         "parameters": params,
-        "offsets_only_rad": dict(zip(names, map(float, base_fit.x[:n_q]))),
-        # The offsets the diagnosis recommends: with the selected effects; the offsets-only
-        # fit's when none is kept (a poor fit's own offsets are kept apart).
-        "offsets_rad": dict(zip(names, map(float, (current_fit if selected else base_fit).x[:n_q]))),
-        "poor_fit_offsets_rad": dict(zip(names, map(float, current_fit.x[:n_q]))) if partial else None,
+        "candidates": [{k: v for k, v in c.items() if k != "ev"} for c in cands],
+        "recommended": rec["name"],
+        # The offsets-only model at its whitened optimum over every training frame (the
+        # framework's fit, polished: `polish`), as every candidate.
+        "offsets_only_rad": dict(zip(names, map(float, base.fit.x[:n_q]))),
+        # The offsets the diagnosis recommends: the candidate model that best predicts each
+        # training stance from the others (`_recommend`).
+        "offsets_rad": rec["offsets_rad"],
+        "poor_fit_offsets_rad": dict(zip(names, map(float, final.fit.x[:n_q]))) if partial else None,
         "offsets_noise_std_rad": dict(zip(names, map(float, sigma0))),
         "tracing": tracing,
         "tracing_after": tracing_after,
         "notes": notes,
         "summary": "",
+        "_candidate_models": {c["name"]: (list(c["ev"].fit.model.effects), c["ev"].fit.x) for c in cands},
     }
     report["summary"] = summary_line(report)
     return report
+
+
+def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, names) -> list[dict]:
+    """The recommendation's candidates: the offsets only, every admissible model fitted
+    (each at its optimum) and the generic geometry; each with its leave-one-stance-out
+    chi-square (None with one stance) and whether its effects are claimed."""
+    out = [{"name": "offsets only", "kind": "offsets", "effects": [], "ev": base, "cv_chi2": cv_base}]
+    seen = {"offsets only"}
+    for label, ev in fitted:
+        if label in seen:
+            continue
+        seen.add(label)
+        out.append({"name": label, "kind": "generic" if label == GENERIC else "effects",
+                    "effects": [] if label == GENERIC else label.split(" + "), "ev": ev,
+                    "cv_chi2": None if cv_base is None else _cv(ev)[0]})
+    for c in out:
+        ev = c["ev"]
+        c.update(k=ev.k, chi2=ev.chi2, dof=ev.dof, admissible=True,
+                 claimed=(c["kind"] == "offsets" or c["effects"] == list(selected)),
+                 set_aside=set_aside.get(c["name"]),
+                 offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))))
+    return out
+
+
+def _recommend(cands: list[dict], verdict: str, selected) -> dict:
+    """The candidate with the lowest leave-one-stance-out chi-square (each training
+    stance predicted from the others): never the held-out sessions, which score it.
+    With one stance, no cross-validation: the selected model, else the offsets only."""
+    for c in cands:
+        c["recommended"] = False
+    if all(c["cv_chi2"] is not None for c in cands):
+        best = min(cands, key=lambda c: c["cv_chi2"])
+    else:
+        label = " + ".join(selected)
+        best = next((c for c in cands if c["name"] == label), cands[0])
+    best["recommended"] = True
+    return best
 
 
 def summary_line(rep: dict) -> str:
@@ -396,15 +597,48 @@ def summary_line(rep: dict) -> str:
     if v == "explained":
         return f"explained by the offsets within the declared noise: {head}"
     if v == "unexplained":
-        poor = (f"; {' + '.join(rep['poor_fit'])} fit poorly (leaves {rep['after']['share_of_excess_left']:.0%} "
-                "of the excess, a leg or IMU error still explains it)") if rep["poor_fit"] else ""
-        return (f"unexplained residual ({head}); no library effect explains it{poor}; {where_text(where)} "
-                f"({where['channel']} rows){_signature_text(rep['tracing'])}")
+        why = "".join(f"; {x['effects']} set aside: {x['why']}" for x in rep.get("set_aside", []))
+        g = rep.get("generic")
+        if g and g["explains"]:
+            return (f"unexplained by the library ({head}){why}; a change of the robot's geometry explains it "
+                    f"(generic fit, {g['parameters']} identifiable parameters: chi2/dof {g['chi2_per_dof']:.3f}, "
+                    f"p = {g['p_value']:.2g}); {family_text(g)}{_signature_text(rep['tracing'])}"
+                    f"{_recommended_text(rep)}")
+        geo = (f"; nor does a change of geometry alone (generic fit chi2/dof {g['chi2_per_dof']:.3f}, "
+               f"p = {g['p_value']:.2g})") if g else ""
+        return (f"unexplained residual ({head}); no library effect explains it{why}{geo}; {where_text(where)} "
+                f"({where['channel']} rows){_signature_text(rep['tracing'])}{_recommended_text(rep)}")
     if v == "ambiguous":
         return (f"ambiguous: {' or '.join(a['effect'] for a in rep['ambiguous'])} explain it about equally ({head});"
-                f" to tell them apart: {'; '.join(dict.fromkeys(a['remedy'] for a in rep['ambiguous']))}")
+                f" to tell them apart: {'; '.join(dict.fromkeys(a['remedy'] for a in rep['ambiguous']))}"
+                f"{_recommended_text(rep)}")
     a = rep["after"]
-    return (f"{v}: {' + '.join(rep['selected'])} ({head} -> {a['chi2_per_dof']:.3f}, p = {a['p_value']:.2g})")
+    return (f"{v}: {' + '.join(rep['selected'])} ({head} -> {a['chi2_per_dof']:.3f}, p = {a['p_value']:.2g})"
+            f"{_recommended_text(rep)}")
+
+
+def family_text(generic: dict) -> str:
+    """Which families of geometry change the generic fit's data are consistent with, and
+    which not (likelihood-ratio tests at ALPHA), and what that says of the legs."""
+    fam = generic["families"]
+    yes = [f for f, v in fam.items() if v["consistent"]]
+    no = [f"{f} (p = {v['p_value']:.1g})" for f, v in fam.items() if not v["consistent"]]
+    legs = [f for f in yes if f.endswith("leg's geometry")]
+    out = (f"consistent with a change of {' or of '.join(yes)} alone" if yes else
+           "no single family of change explains it alone (a combination does)")
+    out += f"; not with {', '.join(no)} alone" if no else ""
+    if len(legs) == 2:
+        out += ("; the data cannot tell the legs apart (moving one hip's mounting by +d is, in inter-foot data, "
+                "moving the other's by -d)")
+    return out
+
+
+def _recommended_text(rep: dict) -> str:
+    rec = next((c for c in rep.get("candidates", []) if c.get("recommended")), None)
+    if rec is None or len(rep.get("candidates", [])) < 2:
+        return ""
+    why = "lowest leave-one-stance-out chi2" if rec.get("cv_chi2") is not None else "one stance: no cross-validation"
+    return f"; recommended offsets: {rec['name']}'s ({why})"
 
 
 def _signature_text(tracing: dict) -> str:

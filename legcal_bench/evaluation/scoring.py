@@ -173,8 +173,8 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
 
 def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | None:
     """Held-out foot height RMS (mm) per estimate (label -> parameter vector x of the
-    model with `effects`: the offsets, one per leg joint, then the effects' parameters): the flat-ground
-    row p_Lz - p_Rz of the held-out recordings through the model at x. On the
+    model with `effects`, names or `Effect` instances: the offsets, one per leg joint,
+    then the effects' parameters): the flat-ground row p_Lz - p_Rz of the held-out recordings through the model at x. On the
     simulator's true postures and vertical where the recordings keep a ground truth
     ("true"), else on the logged encoders and the IMU-levelled vertical ("logged").
     None without held-out recordings."""
@@ -183,7 +183,7 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
 
     kin = LegKinematics(legmap)
     names = legmap.joint_names
-    model = EffectModel(kin, load_effects(list(effects)))
+    model = EffectModel(kin, [load_effects([e])[0] if isinstance(e, str) else e for e in effects])
     heights: dict = {k: [] for k in estimates}
     kinds = set()
     for p in paths:

@@ -14,7 +14,8 @@ def json_ready(report: dict) -> dict:
 
 
 def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | None:
-    """Offsets RMS error (deg) before/after against the ground truth, if the session has one."""
+    """Offsets RMS error (deg) against the ground truth, if the session has one: before
+    (offsets only), after (the recommended estimate) and per candidate."""
     from legcal_bench.data.recording import list_segments, load_truth, truth_path
     from legcal_bench.evaluation.metrics import rms
 
@@ -23,29 +24,36 @@ def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | Non
         return None
     truth = load_truth(first)
     inj = np.asarray(truth.offsets)
-    out = {}
-    for key, field in (("before", "offsets_only_rad"), ("after", "offsets_rad")):
-        x = np.array([report[field][n] for n in joint_names])
-        out[key] = float(np.rad2deg(rms(x - inj)))
+
+    def err(offsets: dict) -> float:
+        return float(np.rad2deg(rms(np.array([offsets[n] for n in joint_names]) - inj)))
+
+    out = {"before": err(report["offsets_only_rad"]), "after": err(report["offsets_rad"]),
+           "candidates": {c["name"]: err(c["offsets_rad"]) for c in report.get("candidates", [])}}
     out["effects_in_truth"] = [e.get("effect") for e in truth.meta.get("reality", {}).get("effects", [])]
     return out
 
 
 def heldout_scores(report: dict, legmap, bags: Path) -> dict | None:
-    """Held-out foot height RMS (mm) with the offsets-only estimate and with the
-    diagnosis's final model (its effects at their fitted values)
-    (`legcal_bench.evaluation.scoring.heldout_heights`)."""
+    """Held-out foot height RMS (mm) with the offsets-only estimate ("before"), the
+    recommended one ("after") and every candidate model at its fitted values
+    (`legcal_bench.evaluation.scoring.heldout_heights`). Scored after the choice: the
+    held-out sessions never pick the estimate."""
     from legcal_bench.data.recording import list_segments
     from legcal_bench.evaluation.scoring import heldout_heights
 
     names = legmap.joint_names
-    effects = list(report["selected"])  # none kept: the recommended offsets are the offsets-only ones
-    params = [p["value"] for p in report["parameters"].values()] if effects else []
-    before = [report["offsets_only_rad"][n] for n in names]
-    x_before = np.r_[before, np.zeros(len(params))]
-    x_after = np.r_[[report["offsets_rad"][n] for n in names], params]
-    return heldout_heights(legmap, list_segments(bags, allow_partial=True), effects,
-                           {"before": x_before, "after": x_after})
+    paths = list_segments(bags, allow_partial=True)
+    out = heldout_heights(legmap, paths, [], {"before": [report["offsets_only_rad"][n] for n in names]})
+    if out is None:
+        return None
+    per = {}
+    for name, (effects, x) in report.get("_candidate_models", {}).items():
+        per[name] = heldout_heights(legmap, paths, effects, {"x": x})["x"]
+    rec = report.get("recommended")
+    out["after"] = per[rec] if rec in per else out["before"]
+    out["candidates"] = per
+    return out
 
 
 def diagnosis_walks(report: dict, legmap, bags: Path, policy: str, trials: int, progress: bool = True) -> dict:
@@ -109,6 +117,54 @@ def where_text(localization: dict) -> str:
     return words(localization)
 
 
+def family_text(generic: dict) -> str:
+    from legcal_bench.evaluation.modelgap import family_text as words
+
+    return words(generic)
+
+
+def _generic_section(report: dict) -> list[str]:
+    g = report.get("generic")
+    if not g:
+        return []
+    L = ["## The generic geometric alternative", "",
+         f"Both legs' full geometry (a twist at each hip's mounting and after each joint) and the IMU's mount, "
+         f"reduced jointly by a pivoted QR to the {g['parameters']} of {g['of']} parameters these data identify "
+         f"beyond the offsets: chi2/dof {g['chi2_per_dof']:.4f} (p = {g['p_value']:.2g}): "
+         + ("it explains the data." if g["explains"] else "it does not explain the data either.")]
+    if "bic_minus_selected" in g:
+        L[-1] += (f" Its BIC minus the selected model's: {g['bic_minus_selected']:.0f} (an effect is claimed only "
+                  f"when this is at least {report['rules']['ambiguous_bic']:g}).")
+    L += ["", "| family alone | parameters | delta chi2 vs the whole | dof | p | consistent |", "|---|---|---|---|---|---|"]
+    for f, v in g["families"].items():
+        L.append(f"| {f} | {v['parameters']} | {v['delta_chi2']:.1f} | {v['dof']} | {v['p_value']:.2g} | "
+                 f"{'yes' if v['consistent'] else 'no'} |")
+    return L + [""]
+
+
+def _candidates_section(report: dict, truth: dict | None) -> list[str]:
+    cands = report.get("candidates", [])
+    if len(cands) < 2:
+        return []
+    cv = report["detection"].get("cross_validation", {})
+    hh = (report.get("heldout_foot_height_mm") or {}).get("candidates", {})
+    tc = (truth or {}).get("candidates", {})
+    L = ["## The recommended estimate", "",
+         "Chosen among these candidates by leave-one-stance-out cross-validation on the training stances (each "
+         "stance predicted from the fit on the others); the held-out figures score the choice, they never make it.",
+         "", "| candidate | parameters | chi2 / dof | left-out chi2 / dof | held-out foot height (mm) | "
+         "offsets error vs truth (deg) | status |", "|---|---|---|---|---|---|---|"]
+    for c in cands:
+        cvd = f"{c['cv_chi2'] / cv['dof']:.4f}" if c.get("cv_chi2") is not None and cv.get("dof") else "–"
+        h = f"{hh[c['name']]:.4f}" if c["name"] in hh else "–"
+        e = f"{tc[c['name']]:.4f}" if c["name"] in tc else "–"
+        status = ("**recommended**" if c["recommended"] else "") + (
+            f" set aside: {c['set_aside']}" if c.get("set_aside") else
+            "" if c.get("claimed") or c["kind"] == "generic" else " not claimed")
+        L.append(f"| {c['name']} | {c['k']} | {c['chi2'] / c['dof']:.4f} | {cvd} | {h} | {e} | {status.strip()} |")
+    return L + [""]
+
+
 def rules_text(report: dict) -> str:
     """The selection's decision rules in words (the report's JSON keeps them as numbers)."""
     r = report["rules"]
@@ -119,7 +175,10 @@ def rules_text(report: dict) -> str:
             f"{r['move_sigmas']:g} noise-only standard deviations. Candidates within {r['ambiguous_bic']:g} of BIC "
             f"of each other are reported as ambiguous; at most {r['max_effects']} effects are kept; a fit that "
             "leaves the residual significant, with a leg or IMU location test significant on it, is a poor fit "
-            f"(set aside). The residual is tested at a false-alarm rate of {report['alpha']:g} in all (each test at "
+            f"(set aside). A fitted parameter outside its effect's declared bounds by more than "
+            f"{r.get('admissible_sigmas', 3):g} standard deviations makes the fit inadmissible. A selection is claimed "
+            f"only if its BIC beats the generic geometric alternative's (both legs and the IMU mount, reduced to "
+            f"what the data identify) by {r['ambiguous_bic']:g}; within that, it is ambiguous. The residual is tested at a false-alarm rate of {report['alpha']:g} in all (each test at "
             f"{report['alpha'] / 2:g}).")
 
 
@@ -127,7 +186,7 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
     d, a = report["detection"], report["after"]
     L = [f"# Model-gap diagnosis: {report['verdict']}", "", f"Made by `{made_by}` ({code}).", "",
          f"**{report['summary']}**", "",
-         "| | offsets only | after |", "|---|---|---|",
+         f"| | offsets only | {'after the selection' if report['steps'] else 'after'} |", "|---|---|---|",
          f"| chi2 / dof (training) | {d['chi2_per_dof']:.4f} (p = {d['p_value']:.2g}) | "
          f"{a['chi2_per_dof']:.4f} (p = {a['p_value']:.2g}) |"]
     if "cross_validation" in d:  # each training stance at the estimate from the others
@@ -138,12 +197,13 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
     start = report.get("start")
     if start:
         L.append(f"| fit started from | {start['calibrator']} | |")
+    rec = f"recommended ({report.get('recommended', 'offsets only')}): "
     if truth:
-        L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {truth['after']:.4f} |")
+        L.append(f"| offsets RMS error vs truth (deg) | {truth['before']:.4f} | {rec}{truth['after']:.4f} |")
     hh = report.get("heldout_foot_height_mm")
     if hh:
         L.append(f"| held-out foot height RMS ({hh['postures']} postures, mm) | {hh['before']:.4f} | "
-                 f"{hh['after']:.4f} |")
+                 f"{rec}{hh['after']:.4f} |")
     L += ["", rules_text(report), ""]
     nz = report.get("noise")
     if nz:
@@ -152,9 +212,12 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
               f"{nz['tilt_used_rad'] * 1e3:.3f} mrad per axis (declared {nz['tilt_declared_rad'] * 1e3:.3f}, "
               f"measured from the data {meas}: the larger is used).", ""]
     if report["parameters"]:
-        if report.get("poor_fit"):
-            L += [f"Set aside, not a result: the fit with {' + '.join(report['poor_fit'])} left the residual "
-                  "significant and structured (a poor fit); its parameters, for reference:", ""]
+        for x in report.get("set_aside", []):
+            L += [f"Set aside, not a result: the fit with {x['effects']}: {x['why']}; its parameters, for "
+                  "reference:", ""]
+        if report.get("ambiguous") and not report.get("set_aside"):
+            L += [f"Not a result (ambiguous): the fit with {' + '.join(report['poor_fit'])}; its parameters, for "
+                  "reference:", ""]
         L += ["| parameter | value | std | unit |", "|---|---|---|---|"]
         for n, p in report["parameters"].items():
             L.append(f"| {n} | {p['value']:.4g} | {p['std']:.2g} | {p['unit']}{' (held: confounded)' if p['held'] else ''} |")
@@ -166,15 +229,24 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
     L += ["", "## Selection steps", ""]
     for st in report["steps"]:
         L += [f"On top of {st['on_top_of'] or 'the offsets'}:", "",
-              "| effect | delta chi2 | BIC penalty | CV agrees | max offset move (sigma) |", "|---|---|---|---|---|"]
+              "| effect | delta chi2 | BIC penalty | CV agrees | max offset move (sigma) | admissible |",
+              "|---|---|---|---|---|---|"]
         for c in st["candidates"]:
+            adm = "yes" if c.get("admissible", True) else "no: " + "; ".join(c["inadmissible"])
             L.append(f"| {c['effect']} | {c['delta_chi2']:.1f} | {c['bic_penalty']:.1f} | {c['passes_cv']} | "
-                     f"{c['max_offset_move_sigmas']:.1f} |")
+                     f"{c['max_offset_move_sigmas']:.1f} | {adm} |")
         L.append("")
+    L += _generic_section(report)
+    L += _candidates_section(report, truth)
     t = report["tracing"]
-    where = ("Localization: none: the offsets explain these data within the declared noise (the tables below "
-             "are the residual's shares, not a finding)." if report["verdict"] == "explained" else
-             f"Localization: {where_text(t['localization'])}; channel **{t['localization']['channel']}**.")
+    g = report.get("generic")
+    if report["verdict"] == "explained":
+        where = ("Localization: none: the offsets explain these data within the declared noise (the tables below "
+                 "are the residual's shares, not a finding).")
+    elif g and g["explains"] and not report["selected"]:
+        where = f"Localization (by the generic fit's families): {family_text(g)}."
+    else:
+        where = f"Localization: {where_text(t['localization'])}; channel **{t['localization']['channel']}**."
     L += ["## Tracing (offsets-only residual)", "", where, "", "| channel | chi2 / expected |", "|---|---|"]
     L += [f"| {c} | {v['ratio']:.3f} |" for c, v in t["channels"].items()]
     L += ["", "| location | delta chi2 | dof |", "|---|---|---|"]

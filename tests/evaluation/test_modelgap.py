@@ -2,7 +2,9 @@
 by the offsets, a library effect is found and named, an edit outside the library is
 "unexplained" and located on the edited leg, never confidently misnamed."""
 
-from legcal_bench.data.recording import load_session
+import numpy as np
+
+from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.evaluation.modelgap import diagnose
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
@@ -51,7 +53,21 @@ def test_a_shank_bent_sideways_is_unexplained_on_the_right_leg(tmp_path):
     rep = _diagnose(tmp_path, "link_offset:link=right_shank,axis=y,mm=3", seed=1)
     assert rep["verdict"] == "unexplained" and not rep["selected"]
     assert rep["tracing"]["localization"]["location"] == "right leg"
-    assert rep["offsets_rad"] == rep["offsets_only_rad"]  # nothing kept: the offsets-only estimate stands
+    # The generic geometric alternative explains it and says which family: a change of the
+    # right leg's geometry, of link translations; not the left leg's, not axis directions.
+    g = rep["generic"]
+    assert g["explains"] and g["families"]["the right leg's geometry"]["consistent"]
+    assert not g["families"]["the left leg's geometry"]["consistent"]
+    assert not g["families"]["axis directions and link twists"]["consistent"]
+    assert "consistent with a change of" in rep["summary"] and "the right leg's geometry" in rep["summary"]
+    # The recommendation: the candidate predicting each stance best from the others (the
+    # generic fit here), whose offsets are closer to the truth than the offsets-only.
+    rec = [c for c in rep["candidates"] if c["recommended"]]
+    assert len(rec) == 1 and rec[0]["cv_chi2"] == min(c["cv_chi2"] for c in rep["candidates"])
+    assert rep["offsets_rad"] == rec[0]["offsets_rad"] and rep["recommended"] == rec[0]["name"] == "generic geometry"
+    truth = load_truth(list_segments(tmp_path / "set")[0]).offsets
+    err = {k: np.sqrt(np.mean((np.array(list(rep[k].values())) - truth) ** 2)) for k in ("offsets_rad", "offsets_only_rad")}
+    assert err["offsets_rad"] < 0.5 * err["offsets_only_rad"], err
 
 
 def test_diagnose_refuses_recordings_that_declare_no_noise(tmp_path):
@@ -158,3 +174,65 @@ def test_a_tie_between_the_legs_is_reported_as_a_tie_with_its_reason():
     clear = localize(locs(3000.0, 4000.0, 12.0))
     assert clear["location"] == "right leg" and clear["tied_with"] == [] and clear["margin"] == 1000.0
     assert "tie" not in where_text(clear) and "by 1000 of chi2" in where_text(clear)
+
+
+def _short_set(tmp_path, effect, seed):
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="kinematic", sensors="calibrated-imu", seed=seed, stance_s=4.0,
+                          heldout=0, effects=(effect,)), tmp_path / "set", progress=False)
+    return lm, load_session(tmp_path / "set", robot=lm)
+
+
+def test_nested_fits_never_end_above_the_model_they_extend(tmp_path):
+    # Issue #41: a selection table once showed `leg_length | -304.1` (reports/diagnose/
+    # g1_leg_length_poor at 892ff85): each fit trimmed its own frames and was scored by
+    # a one-step prediction at its own point. Now every model is polished from the one
+    # it extends; on two cases outside and inside the library every delta chi2 >= 0, and
+    # the generic fit (which holds the offsets-only model) is not above it either.
+    for i, (effect, seed) in enumerate((("link_length:link=left_shank,mm=3", 0),
+                                        ("link_offset:link=right_shank,axis=y,mm=3", 1))):
+        lm, recs = _short_set(tmp_path / str(i), effect, seed)
+        rep = diagnose(lm, recs)
+        assert rep["steps"], rep["summary"]
+        for step in rep["steps"]:
+            for c in step["candidates"]:
+                assert c["delta_chi2"] >= 0, (effect, step["on_top_of"], c["effect"], c["delta_chi2"])
+        assert rep["generic"]["chi2"] <= rep["detection"]["chi2"]
+
+
+def test_a_nested_fit_that_ends_above_its_parent_raises(tmp_path, monkeypatch):
+    # The run-time check: a polish that went uphill is a bug, raised as one (not a data error).
+    import pytest
+
+    from legcal_bench.estimation.problem.fit import fit_model
+    from legcal_bench.evaluation import modelgap as mg
+
+    lm, recs = _short_set(tmp_path, "link_length:link=left_shank,mm=3", 0)
+    ctx = mg.context(lm, recs)
+    parent = mg.polish(ctx, fit_model(ctx.prep))
+    child = mg.nested(ctx, parent, "leg_length", {})
+    assert child.chi2 < parent.chi2 - 100  # a 3 mm shank: the lengths explain much of it
+    real = mg.polish
+    monkeypatch.setattr(mg, "polish", lambda ctx, fit: mg.Evaluated(**{**real(ctx, fit).__dict__,
+                                                                       "chi2": parent.chi2 * 1.001}))
+    with pytest.raises(mg.NestedFitError, match="above"):
+        mg.nested(ctx, parent, "leg_length", {})
+    from legcal_bench.errors import LegcalError
+
+    assert not issubclass(mg.NestedFitError, LegcalError)  # a bug: not reported as the user's error
+
+
+def test_an_inadmissible_fit_is_named_and_not_selected(tmp_path):
+    # A negative stiffness or a length beyond its tolerance is not the effect but something
+    # it absorbs (issue #41): `inadmissible` names the parameter, its value and its bounds.
+    from legcal_bench.estimation.problem.fit import fit_model
+    from legcal_bench.evaluation import modelgap as mg
+
+    lm, recs = _short_set(tmp_path, "link_length:link=left_shank,mm=3", 0)
+    ctx = mg.context(lm, recs)
+    ev = mg.nested(ctx, mg.polish(ctx, fit_model(ctx.prep)), "leg_length", {})
+    assert mg.inadmissible(ctx, ev, ["leg_length"]) == []
+    i = ev.fit.model.names.index("leg_length.left_shank")
+    ev.fit.x[i] = 0.05  # 5 cm: beyond the declared 1 cm
+    bad = mg.inadmissible(ctx, ev, ["leg_length"])
+    assert len(bad) == 1 and bad[0].startswith("leg_length.left_shank = 0.05") and "[-0.01, 0.01]" in bad[0]

@@ -31,6 +31,13 @@ from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import SIDES
 
 COMPLIANT = ("hip_roll", "knee", "ankle_pitch")
+# Admissible values (`Effect.bounds`): what a build or a mounting can plausibly be off by.
+# Beyond them a fitted value is not the effect but something it is absorbing.
+LENGTH_TOLERANCE = 0.010  # m: a link's length off by at most 1 cm
+SCALE_TOLERANCE = 0.05  # an encoder's scale off by at most 5 %
+MAX_COMPLIANCE = 1e-3  # rad/(N m): a joint no softer than 1000 N m/rad; and never negative
+TILT_TOLERANCE = np.deg2rad(5.0)  # rad: an IMU mounted at most 5 deg off
+AXIS_TOLERANCE = np.deg2rad(3.0)  # rad: a joint axis at most 3 deg off
 
 
 def _role_joints(kin: LegKinematics, roles) -> list[tuple[str, int]]:
@@ -60,6 +67,9 @@ class LegLength(Effect):
     def parameters(self, kin):
         return [(name, "m") for name, _, _ in self._links(kin)]
 
+    def bounds(self, kin):
+        return [(-LENGTH_TOLERANCE, LENGTH_TOLERANCE)] * len(self._links(kin))
+
     def factors(self, kin):
         links = self._links(kin)
         out = []
@@ -79,6 +89,9 @@ class EncoderScale(Effect):
     def parameters(self, kin):
         return [(label, "1") for label, _ in _role_joints(kin, PITCH_ROLES)]
 
+    def bounds(self, kin):
+        return [(-SCALE_TOLERANCE, SCALE_TOLERANCE)] * len(_role_joints(kin, PITCH_ROLES))
+
     def joint_map(self, kin, seg: SegmentData):
         joints = _role_joints(kin, PITCH_ROLES)
         A = np.zeros((len(seg.q_enc), kin.legmap.n_joints, len(joints)))
@@ -96,6 +109,9 @@ class Compliance(Effect):
 
     def parameters(self, kin):
         return [(label, "rad/(N m)") for label, _ in _role_joints(kin, COMPLIANT)]
+
+    def bounds(self, kin):
+        return [(0.0, MAX_COMPLIANCE)] * len(_role_joints(kin, COMPLIANT))
 
     def joint_map(self, kin, seg: SegmentData):
         if seg.ft is None or seg.up_B is None:
@@ -119,6 +135,9 @@ class ImuTilt(Effect):
     def parameters(self, kin):
         return [("roll", "rad"), ("pitch", "rad")]
 
+    def bounds(self, kin):
+        return [(-TILT_TOLERANCE, TILT_TOLERANCE)] * 2
+
     def imu_axes(self, kin):
         return np.eye(3)[:2]
 
@@ -137,6 +156,9 @@ class HipAxis(Effect):
 
     def parameters(self, kin):
         return [(f"{s}_about_{a}", "rad") for s, _ in self._joints(kin) for a in ("x", "z")]
+
+    def bounds(self, kin):
+        return [(-AXIS_TOLERANCE, AXIS_TOLERANCE)] * 4
 
     def factors(self, kin):
         out = []

@@ -77,6 +77,22 @@ class Effect(ABC):
         """(P, 3) IMU-frame rotation axis per parameter (zero rows elsewhere), or None."""
         return None
 
+    def bounds(self, kin: LegKinematics) -> list[tuple[float, float]]:
+        """(low, high) of each parameter's physically admissible values, SI units (a
+        stiffness is positive, a length within its declared tolerance); default: any
+        value. A fit whose value lies outside by more than its noise is set aside."""
+        return [(-np.inf, np.inf)] * len(self.parameters(kin))
+
+    # Physics for simulation (optional): an effect that sets `sim_keys` ({key: (kind,
+    # default)}, kind "number" or "text") can be injected by `collect --effects
+    # <name>:key=value,...`; the simulator (`legcal_bench.sim.effects`) then calls
+    # `simulate(values, edit)` with the parsed values and a `legcal_bench.sim.effects.ModelEdit`
+    # (the simulated robot's MJCF to change) and records the dict it returns as the truth.
+    sim_keys: dict | None = None
+
+    def simulate(self, values: dict, edit) -> dict:
+        raise NotImplementedError(f"effect {self.name}: no physics for simulation (sim_keys/simulate)")
+
 
 def registry() -> dict[str, type[Effect]]:
     """Effect classes by name: the entry-point group `legcal_bench.effects`. Read once

@@ -57,3 +57,26 @@ def score_beyond(z: np.ndarray, Qn: np.ndarray, C: np.ndarray, resolution: float
     floor = max(resolution, RANK_RTOL) * np.linalg.norm(C, 2)
     Qc = U[:, s > floor]
     return float(np.sum((Qc.T @ zp) ** 2)), int(Qc.shape[1])
+
+
+def identifiable(N: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> np.ndarray:
+    """Indices of the columns of C that are identifiable beyond the nuisance columns N,
+    jointly (FIGAROH's base parameters): a QR with column pivoting of C, each column
+    scaled to unit norm and N projected out, keeps a pivot column while its residue
+    beyond N and the pivots before it exceeds `resolution` (`score`'s sense: relative to
+    C's largest singular value; `RANK_RTOL` at least). The others are combinations of
+    the kept ones and N, or below what the data resolve: held at zero, they are absorbed
+    by the kept ones."""
+    from scipy.linalg import qr
+
+    if C.shape[1] == 0:
+        return np.zeros(0, dtype=int)
+    norms = np.linalg.norm(C, axis=0)
+    live = np.flatnonzero(norms > 0)
+    Cs = C[:, live] / norms[live]
+    Qn = basis(N)
+    Cp = Cs - Qn @ (Qn.T @ Cs)
+    _, R, piv = qr(Cp, mode="economic", pivoting=True)
+    floor = max(resolution, RANK_RTOL) * np.linalg.norm(Cs, 2)
+    k = int(np.sum(np.abs(np.diag(R)) > floor))
+    return np.sort(live[piv[:k]])

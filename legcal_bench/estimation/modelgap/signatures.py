@@ -2,9 +2,9 @@
 cause would add to the residual, scored against the whitened residual by
 `legcal_bench.estimation.modelgap.lineartests.score` (no fit, no library needed).
 
-  leg geometry   a generic error of one leg's chain: a 6-dof twist after each of its
-                 joints (`LegGeometry`, an effect with factors, not a library effect:
-                 6 parameters per joint that say which leg, not what);
+  leg geometry   a generic error of one leg's chain: a 6-dof twist at its mounting and
+                 after each of its joints (`LegGeometry`, an effect with factors, not a
+                 library effect: parameters that say which leg, not what);
   joint angle    a joint's apparent offset growing with its angle (any scale-like cause);
   joint load     ... with its gravity/contact load from the ankle wrenches (compliance-like);
   motion         ... with the sign of its velocity (backlash, friction-like);
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from legcal_bench.estimation.modelgap.effect_library import ImuTilt
 from legcal_bench.estimation.modelgap.effects import Effect
 from legcal_bench.estimation.problem.residuals import project_mean
 from legcal_bench.robots.kinematics import LegKinematics
@@ -25,27 +26,62 @@ from legcal_bench.robots.kinematics import LegKinematics
 FAMILIES = ("angle", "load", "motion")
 
 
-class LegGeometry(Effect):
-    """A generic geometric error of one leg (tracing only: not registered)."""
+TWIST = ("tx", "ty", "tz", "rx", "ry", "rz")  # a twist's components: translations (m), rotations (rad)
 
-    summary = "a 6-dof twist after each joint of one leg"
+
+class LegGeometry(Effect):
+    """A generic geometric error of one leg (not registered): a 6-dof twist at the hip's
+    mounting (after M_0: the first joint's anchor and axis moved) and after each of its
+    joints (link translations, bends and twists, the next axis's direction, the sole's
+    placement). Tracing scores it as a location; the generic alternative
+    (`generic_effects`) fits both legs' together with the IMU's mount."""
+
+    summary = "a 6-dof twist at the hip's mounting and after each joint of one leg"
 
     def __init__(self, side: str):
         self.side = side
         self.name = f"leg_geometry_{side}"
 
+    def _places(self, kin: LegKinematics) -> list[tuple[str, int]]:
+        """(label, chain element the twist follows) of each twist: the mounting, then
+        after each joint (`legcal_bench.robots.chain.Factor`'s element numbering)."""
+        roles = [kin.legmap.joint_roles[int(c)] for c in kin.poe[self.side].cols]
+        return [("mount", 0)] + [(f"after_{r}", 2 * k + 1) for k, r in enumerate(roles)]
+
     def parameters(self, kin: LegKinematics):
-        return [(f"after_joint{k}_{c}", "m" if c < 3 else "rad") for k in range(kin.legmap.leg_joints)
-                for c in range(6)]
+        return [(f"{place}_{c}", "m" if c[0] == "t" else "rad") for place, _ in self._places(kin) for c in TWIST]
 
     def factors(self, kin: LegKinematics):
+        places = self._places(kin)
         out = []
-        n_chain = kin.legmap.leg_joints
-        for k in range(n_chain):
-            gens = np.zeros((6 * n_chain, 6))
-            gens[6 * k:6 * k + 6] = np.eye(6)
-            out.append((self.side, 2 * k + 1, gens))  # after E_k
+        for i, (_, after) in enumerate(places):
+            gens = np.zeros((6 * len(places), 6))
+            gens[6 * i:6 * i + 6] = np.eye(6)
+            out.append((self.side, after, gens))
         return out
+
+
+def generic_effects() -> list[Effect]:
+    """The generic kinematic alternative: both legs' full geometry (`LegGeometry`) and
+    the IMU's mount (its tilt), one model. The legs are one block: moving one hip by +d
+    is, in inter-foot data, moving the other by -d, so they are reduced together
+    (`legcal_bench.estimation.modelgap.lineartests.identifiable`)."""
+    return [LegGeometry("left"), LegGeometry("right"), ImuTilt()]
+
+
+# Families of geometry changes the generic fit is tested against (`family_columns`):
+# which of them alone explain the data as well as the whole.
+GEOMETRY_FAMILIES = {
+    "link translations (mounting points, lengths, axis offsets)": lambda name: _part(name) == "t",
+    "axis directions and link twists": lambda name: _part(name) == "r",
+    "the IMU's mount": lambda name: name.startswith("imu_tilt."),
+    "the left leg's geometry": lambda name: name.startswith("leg_geometry_left."),
+    "the right leg's geometry": lambda name: name.startswith("leg_geometry_right."),
+}
+
+
+def _part(name: str) -> str:
+    return name.rsplit("_", 1)[-1][0] if name.startswith("leg_geometry_") else ""
 
 
 def joint_columns(G: np.ndarray, values: np.ndarray) -> np.ndarray:
