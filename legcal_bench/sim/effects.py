@@ -26,6 +26,14 @@ collection seed. Units at this edge: degrees, millimetres, N m/rad, fractions.
   link_twist:link=left_thigh,deg=1     the MJCF copy with the link twisted about its own
                                        long axis (the line between its two joints): the
                                        far joint's body and everything below it turned
+  mount_offset:side=left,axis=y,mm=4   the MJCF copy with a hip's mounting point moved: the
+                                       body carrying the first joint of that leg's chain
+                                       (and the whole leg) moved along x, y or z of the
+                                       robot's frame at the zero posture
+  joint_offset:joint=left_ankle_roll,axis=x,mm=3
+                                       the same for any leg joint's body (side_role or the
+                                       leg map's joint name): that joint and all below it
+                                       moved, e.g. the distance between the ankle axes
   compliance:joint=left_knee,k=1e4     the MJCF copy with a spring (stiffness k, N m/rad)
                                        in series between the motor, whose angle the
                                        encoder reads, and the link: a passive hinge
@@ -38,22 +46,34 @@ collection seed. Units at this edge: degrees, millimetres, N m/rad, fractions.
                                        the stance frame's origin, gravity unchanged (weld,
                                        kinematic modes)
 
+Plug-ins add more (docs/effect-plugins.md): any class of the entry-point group
+`legcal_bench.effects` that sets `sim_keys` ({key: (kind, default)}, kind "number" or
+"text") and `simulate(values, edit)` is an effect name here too. `simulate` gets the
+spec's values (in the spec's units) and a `ModelEdit` (the simulated robot's MJCF copy,
+its leg map, kinematics, sole frames and sensors, with helpers to move a body, site or
+geom by a motion written in the robot's frame at the zero posture) and returns the
+truth (a dict, SI units). The MJCF-changing kinds above go through the same
+`ModelEdit`. This module finds plug-ins through their entry points only (duck-typed):
+the simulation layer does not import the estimation layer that defines `Effect`.
+
 The generic route for an effect nobody anticipated is an edited MJCF given as the
 simulated model (`collect --sim-model`).
 """
 
 from __future__ import annotations
 
+import sys
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import ConfigError
-from legcal_bench.geometry.poses import wxyz
-from legcal_bench.robots.legmap import SIDES, LegMap
-from legcal_bench.sim.names import EFFECTS_HELP, KINDS
+from legcal_bench.geometry.poses import from_wxyz, wxyz
+from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
+from legcal_bench.sim.names import EFFECT_GROUP, EFFECTS_HELP, KINDS
 from legcal_bench.sim.sensors import SimSensors
 
 COMPLIANCE_PREFIX = "legcal_compliance_"  # a passive series hinge after the motor joint it names
@@ -61,30 +81,92 @@ COMPLIANCE_DAMPING_RATIO = 0.7  # of the spring against the motor's armature
 MIN_ARMATURE = 0.01  # kg m^2, given to a motor joint without one (a rotor always has some)
 LINKS = ("thigh", "shank")
 ABOUT = ("x", "y", "z")
+PLUGIN_KEY_KINDS = ("number", "text")  # of a plug-in's `sim_keys`
 
 
 @dataclass(frozen=True)
 class RealityEffect:
-    """One parsed effect spec; `values` in the spec's units, targets as written (or None)."""
+    """One parsed effect spec; `values` in the spec's units, targets as written (or None).
+    `plugin`: the effect plug-in's class (None for a built-in kind)."""
 
     kind: str
     values: dict
     spec: str
+    plugin: type | None = field(default=None, compare=False)
+
+
+def effect_plugins() -> dict[str, type]:
+    """Installed effect plug-ins with physics for simulation: name -> class, for each entry
+    point of the group `legcal_bench.effects` whose class sets `sim_keys` (a built-in
+    kind's name is never taken by one). Scanned once per import path (`sys.path`)."""
+    return dict(_plugins(tuple(sys.path))[0])
+
+
+@lru_cache(maxsize=8)
+def _plugins(path: tuple[str, ...]) -> tuple[tuple, tuple, tuple]:
+    """((name, class) with physics, names without (fit only), (name, error) that failed to load)."""
+    from importlib.metadata import entry_points
+
+    sim, fit_only, failed, seen = [], [], [], set()
+    for ep in entry_points(group=EFFECT_GROUP):
+        if ep.name in KINDS or ep.name in seen:
+            continue
+        seen.add(ep.name)
+        try:
+            cls = ep.load()
+        except Exception as e:  # noqa: BLE001 - a broken plug-in is reported, not fatal to the others
+            failed.append((ep.name, f"{type(e).__name__}: {e}"))
+            continue
+        (sim.append((ep.name, cls)) if getattr(cls, "sim_keys", None) else fit_only.append(ep.name))
+    return tuple(sim), tuple(fit_only), tuple(failed)
+
+
+def _plugin_keys(name: str, cls: type, spec: str) -> dict:
+    keys = cls.sim_keys
+    ok = isinstance(keys, dict) and all(
+        isinstance(k, str) and isinstance(v, (tuple, list)) and len(v) == 2 and v[0] in PLUGIN_KEY_KINDS
+        for k, v in keys.items())
+    if not ok or not callable(getattr(cls, "simulate", None)):
+        raise ConfigError(f"--effect {spec!r}: effect plug-in {name!r} ({cls.__module__}.{cls.__qualname__}) "
+                          "needs sim_keys = {key: (kind, default)} with kind 'number' or 'text', and a method "
+                          "simulate(values, edit) (docs/effect-plugins.md)")
+    return dict(keys)
+
+
+def _unknown(spec: str, name: str) -> ConfigError:
+    sim, fit_only, failed = _plugins(tuple(sys.path))
+    if name in fit_only:
+        return ConfigError(f"--effect {spec!r}: effect {name!r} is installed (entry-point group {EFFECT_GROUP}) "
+                           "for fitting only: its class sets no sim_keys/simulate, the physics a simulation needs "
+                           "(docs/effect-plugins.md)")
+    broken = dict(failed)
+    if name in broken:
+        return ConfigError(f"--effect {spec!r}: effect plug-in {name!r} (entry-point group {EFFECT_GROUP}) failed "
+                           f"to load: {broken[name]}")
+    listed = "; ".join(f"{n} ({', '.join(cls.sim_keys)})" for n, cls in sim) or "none"
+    return ConfigError(f"--effect {spec!r}: unknown effect {name!r}; use {EFFECTS_HELP}. Installed plug-ins with "
+                       f"physics: {listed}")
 
 
 def parse_effect(spec: str) -> RealityEffect:
     s = str(spec).strip()
     name, _, rest = s.partition(":")
-    if name not in KINDS:
-        raise ConfigError(f"--effect {spec!r}: unknown effect {name!r}; use {EFFECTS_HELP}")
-    kind = KINDS[name]
-    values = {k: d for k, (_, d) in kind.keys.items()}
+    plugin = None
+    if name in KINDS:
+        keys = KINDS[name].keys
+    else:
+        plugin = effect_plugins().get(name)
+        if plugin is None:
+            raise _unknown(spec, name)
+        keys = _plugin_keys(name, plugin, spec)
+    values = {k: d for k, (_, d) in keys.items()}
     for item in filter(None, (p.strip() for p in rest.split(","))):
         k, eq, v = item.partition("=")
-        if not eq or k not in kind.keys:
+        k = k.strip()
+        if not eq or k not in keys:
             raise ConfigError(f"--effect {spec!r}: {item!r} is not key=value with a key of {name} "
-                              f"({', '.join(kind.keys)})")
-        if kind.keys[k][0] == "number":
+                              f"({', '.join(keys)})")
+        if keys[k][0] == "number":
             try:
                 values[k] = float(v)
             except ValueError:
@@ -93,14 +175,34 @@ def parse_effect(spec: str) -> RealityEffect:
                 raise ConfigError(f"--effect {spec!r}: {k} must be finite")
         else:
             values[k] = v.strip()
-    missing = [k for k, (t, d) in kind.keys.items() if t == "number" and values[k] is None]
+    missing = [k for k, (t, d) in keys.items() if t == "number" and values[k] is None]
     if missing:
         raise ConfigError(f"--effect {spec!r}: give {', '.join(missing)} (e.g. {name}:{missing[0]}=...)")
     if name == "compliance" and values["k"] <= 0:
         raise ConfigError(f"--effect {spec!r}: k is a stiffness in N m/rad and must be > 0 (e.g. k=1e4)")
     if name == "encoder_scale" and values["scale"] <= -1:
         raise ConfigError(f"--effect {spec!r}: scale must be > -1 (a fraction, e.g. 0.005)")
-    return RealityEffect(name, values, s)
+    return RealityEffect(name, values, s, plugin)
+
+
+def _plugin_truth(e: RealityEffect, out) -> dict:
+    """A plug-in's truth as plain JSON values (NumPy scalars and arrays converted): it is
+    written into every truth file's meta."""
+    import json
+
+    def plain(o):
+        if hasattr(o, "tolist"):
+            return o.tolist()
+        raise TypeError(f"{type(o).__name__} is not a JSON value")
+
+    if not isinstance(out, dict):
+        raise ConfigError(f"--effect {e.spec!r}: effect plug-in {e.kind!r}: simulate() must return the truth as a "
+                          f"dict (SI units), not {type(out).__name__}")
+    try:
+        return json.loads(json.dumps(out, default=plain))
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"--effect {e.spec!r}: effect plug-in {e.kind!r}: simulate()'s truth must hold JSON "
+                          f"values (numbers, text, lists): {err}") from None
 
 
 def floor_key(side: str, stance: str) -> str:
@@ -139,6 +241,259 @@ def _choice(text, options, rng, spec: str, what: str) -> str:
     return text
 
 
+def _pose(R: np.ndarray, p) -> np.ndarray:
+    T = np.eye(4)
+    T[:3, :3], T[:3, 3] = R, p
+    return T
+
+
+def _inv(T: np.ndarray) -> np.ndarray:
+    return _pose(T[:3, :3].T, -T[:3, :3].T @ T[:3, 3])
+
+
+ORIENTATIONS = ("quat", "axisangle", "euler", "xyaxes", "zaxis")  # an MJCF element's ways to write its rotation
+
+
+def _orientation(el, compiler) -> np.ndarray:
+    """The rotation matrix an MJCF body, site or geom element writes (any of MuJoCo's
+    forms, in the model's compiler angle unit and Euler sequence)."""
+    degrees = (compiler.angle or "degree") == "degree"
+    if el.quat is not None:
+        return from_wxyz(el.quat).as_matrix()
+    if el.axisangle is not None:
+        a = np.asarray(el.axisangle, float)
+        return Rotation.from_rotvec(a[:3] / np.linalg.norm(a[:3]) * (np.radians(a[3]) if degrees else a[3])).as_matrix()
+    if el.euler is not None:  # MuJoCo: lower case = rotating axes; SciPy: lower case = fixed axes
+        return Rotation.from_euler((compiler.eulerseq or "xyz").swapcase(), el.euler, degrees=degrees).as_matrix()
+    if el.xyaxes is not None:
+        a = np.asarray(el.xyaxes, float)
+        x = a[:3] / np.linalg.norm(a[:3])
+        y = a[3:] - (a[3:] @ x) * x
+        y /= np.linalg.norm(y)
+        return np.column_stack([x, y, np.cross(x, y)])
+    if el.zaxis is not None:
+        z = np.asarray(el.zaxis, float) / np.linalg.norm(el.zaxis)
+        c = np.cross([0.0, 0.0, 1.0], z)
+        if np.linalg.norm(c) < 1e-12:
+            return np.eye(3) if z[2] > 0 else Rotation.from_rotvec([np.pi, 0, 0]).as_matrix()
+        return Rotation.from_rotvec(c / np.linalg.norm(c) * np.arctan2(np.linalg.norm(c), z[2])).as_matrix()
+    return np.eye(3)
+
+
+@dataclass(frozen=True)
+class SoleFrame:
+    """A leg's sole frame as the simulated robot has it: an MJCF site, or (leg map
+    `sole: {body, pos, rpy}`) a pose on a body; `pose` in the robot frame at the zero
+    posture, with the edits made so far. Give it to `ModelEdit.move` (and `rotate`,
+    `translate`) to move the sole frame itself."""
+
+    side: str
+    body: str  # the MJCF body the sole is fixed to
+    site: str | None  # the MJCF site that is the sole frame, or None (a leg-map pose on `body`)
+    pose: np.ndarray  # (4, 4)
+
+
+class ModelEdit:
+    """The simulated robot being changed, handed to an effect plug-in's `simulate(values,
+    edit)`; the built-in MJCF kinds use it too.
+
+    Attributes:
+      mjcf     the dm_control `mjcf.RootElement` of the simulated robot's MJCF copy: change
+               it freely (bodies, joints, sites, geoms, sensors); it is exported with its
+               assets once every effect has run
+      legmap   the simulated robot's leg map (`LegMap`); a moved leg-map frame (`move` of a
+               `sole` on a body) replaces it
+      kin      `LegKinematics` of the simulated robot as loaded, before any edit (the legs'
+               chains: `kin.poe[side].cols` the leg-map indices of a leg's joints, hip first)
+      sensors  the simulated sensors (`legcal_bench.sim.sensors.SimSensors`); replace it
+               (`dataclasses.replace`) to change a sensor's errors
+      rng      NumPy generator of the collection seed, for a target the spec left out
+      spec     the spec being applied (for messages)
+
+    Poses and motions are 4x4 matrices in the robot's (pelvis) frame at the zero posture
+    (leg joints at zero, held joints at their angles), computed by MuJoCo on the current
+    copy: a motion D moves an element's pose T to D T."""
+
+    def __init__(self, legmap: LegMap, sensors: SimSensors, rng: np.random.Generator, spec: str = ""):
+        from dm_control import mjcf
+
+        self.legmap, self.sensors, self.rng, self.spec = legmap, sensors, rng, spec
+        self.mjcf = mjcf.from_path(str(legmap.mjcf))
+        self._kin = None
+        self._live = None  # (MjModel, MjData, inverse pelvis pose) at the zero posture
+
+    @property
+    def kin(self):
+        if self._kin is None:
+            from legcal_bench.robots.kinematics import LegKinematics
+
+            self._kin = LegKinematics(self.legmap)
+        return self._kin
+
+    # ----------------------------------------------------------------- looking up
+    def error(self, message: str) -> ConfigError:
+        """A ConfigError about the spec being applied (raise it)."""
+        return ConfigError(f"--effect {self.spec!r}: {message}")
+
+    def choose(self, text: str | None, options, what: str) -> str:
+        """`text` if it is one of `options`, a draw from `rng` if None, else a ConfigError."""
+        return _choice(text, options, self.rng, self.spec, what)
+
+    def joint(self, text: str | None, roles=None) -> int:
+        """The leg-map index of the leg joint `text` names (side_role like `left_knee`, or the
+        leg map's joint name; drawn if None), among `roles` if given."""
+        return _resolve_joint(self.legmap, text, self.rng, self.spec, roles)
+
+    def chain(self, side: str) -> list[int]:
+        """Leg-map indices of `side`'s joints in chain order, pelvis to foot."""
+        return [int(c) for c in self.kin.poe[side].cols]
+
+    def joint_body(self, index: int):
+        """The MJCF body element carrying leg joint `index` (leg-map order)."""
+        return self.mjcf.find("joint", self.legmap.joint_names[index]).parent
+
+    def find(self, kind: str, name: str):
+        """The MJCF element of `kind` (body, site, geom, joint, ...) named `name`, or a ConfigError."""
+        el = self.mjcf.find(kind, name)
+        if el is None:
+            raise self.error(f"no {kind} named {name!r} in {self.legmap.mjcf}")
+        return el
+
+    def sole(self, side: str) -> SoleFrame:
+        """`side`'s sole frame as edited so far."""
+        spec = self.legmap.legs[side].sole
+        if spec.site is not None:
+            site = self.find("site", spec.site)
+            return SoleFrame(side, site.parent.full_identifier, spec.site, self.pose(site))
+        body = self.find("body", spec.body)
+        local = _pose(Rotation.from_euler("xyz", spec.rpy).as_matrix(), spec.pos)
+        return SoleFrame(side, spec.body, None, self.pose(body) @ local)
+
+    def collision_geoms(self, body) -> list:
+        """The geoms directly on MJCF `body` (an element or its name) that collide (contype
+        or conaffinity nonzero, defaults applied): a foot's contact surfaces."""
+        import mujoco
+
+        body = self.find("body", body) if isinstance(body, str) else body
+        model = self._zero()[0]
+        out = []
+        for g in body.geom:
+            gid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_GEOM, g.full_identifier)
+            if model.geom_contype[gid] or model.geom_conaffinity[gid]:
+                out.append(g)
+        return out
+
+    def pose(self, el) -> np.ndarray:
+        """(4, 4) pose of a body, site or geom element (a geom's frame as written, before
+        MuJoCo re-centres a mesh) in the robot frame at the zero posture."""
+        if isinstance(el, SoleFrame):
+            return self.sole(el.side).pose
+        if el.tag == "body" or el is self.mjcf.worldbody:
+            return self._body_pose(el)
+        return self._body_pose(el.parent) @ self._local(el)
+
+    def joint_anchor(self, index: int) -> tuple[np.ndarray, np.ndarray]:
+        """(anchor point, unit axis) of leg joint `index` in the robot frame at the zero posture."""
+        import mujoco
+
+        model, data, inv_pelvis = self._zero()
+        jid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, self.legmap.joint_names[index])
+        return inv_pelvis[:3, :3] @ data.xanchor[jid] + inv_pelvis[:3, 3], inv_pelvis[:3, :3] @ data.xaxis[jid]
+
+    # ----------------------------------------------------------------- changing
+    def move(self, el, D: np.ndarray) -> None:
+        """Move a body (with everything on and below it), a site or a geom, or a `SoleFrame`
+        (the sole frame itself), by the rigid motion D (4, 4; robot frame, zero posture)."""
+        D = np.asarray(D, dtype=float)
+        if isinstance(el, SoleFrame):
+            return self._move_sole(el.side, D)
+        T_p = self._body_pose(el.parent)
+        D_p = _inv(T_p) @ D @ T_p  # the motion in the parent body's frame
+        if el.tag in ("geom", "site") and el.fromto is not None:
+            ends = np.asarray(el.fromto, float).reshape(2, 3) @ D_p[:3, :3].T + D_p[:3, 3]
+            el.fromto = ends.ravel().tolist()
+        else:
+            T = D_p @ self._local(el)
+            for attr in ORIENTATIONS:
+                setattr(el, attr, None)
+            el.pos, el.quat = T[:3, 3].tolist(), wxyz(Rotation.from_matrix(T[:3, :3])).tolist()
+        if el.tag == "body":
+            self._live = None
+
+    def translate(self, el, vector) -> None:
+        """`move` by a translation (m, robot frame at the zero posture)."""
+        self.move(el, _pose(np.eye(3), np.asarray(vector, dtype=float)))
+
+    def rotate(self, el, rotvec, point) -> None:
+        """`move` by the rotation `rotvec` (axis times angle, rad, robot frame) about `point`
+        (m, robot frame at the zero posture)."""
+        R = Rotation.from_rotvec(np.asarray(rotvec, dtype=float)).as_matrix()
+        point = np.asarray(point, dtype=float)
+        self.move(el, _pose(R, point - R @ point))
+
+    # ----------------------------------------------------------------- internals
+    def _move_sole(self, side: str, D: np.ndarray) -> None:
+        spec = self.legmap.legs[side].sole
+        if spec.site is not None:
+            return self.move(self.find("site", spec.site), D)
+        T_b = self._body_pose(self.find("body", spec.body))
+        T = _inv(T_b) @ D @ T_b @ _pose(Rotation.from_euler("xyz", spec.rpy).as_matrix(), spec.pos)
+        frame = FrameSpec(body=spec.body, pos=tuple(float(x) for x in T[:3, 3]),
+                          rpy=tuple(float(x) for x in Rotation.from_matrix(T[:3, :3]).as_euler("xyz")))
+        legs = dict(self.legmap.legs)
+        legs[side] = replace(legs[side], sole=frame)
+        self.legmap = replace(self.legmap, legs=legs)
+
+    def _local(self, el) -> np.ndarray:
+        """An element's pose in its parent body's frame, as written."""
+        if el.tag in ("geom", "site") and el.fromto is not None:
+            a, b = np.asarray(el.fromto, float).reshape(2, 3)
+            z = (b - a) / np.linalg.norm(b - a)
+            c = np.cross([0.0, 0.0, 1.0], z)
+            R = (Rotation.from_rotvec(c / np.linalg.norm(c) * np.arctan2(np.linalg.norm(c), z[2])).as_matrix()
+                 if np.linalg.norm(c) > 1e-12 else np.eye(3))
+            return _pose(R, (a + b) / 2)
+        return _pose(_orientation(el, self.mjcf.compiler), el.pos if el.pos is not None else np.zeros(3))
+
+    def _body_pose(self, body) -> np.ndarray:
+        import mujoco
+
+        model, data, inv_pelvis = self._zero()
+        if body is self.mjcf.worldbody:
+            return inv_pelvis
+        bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body.full_identifier)
+        return inv_pelvis @ _pose(data.xmat[bid].reshape(3, 3), data.xpos[bid])
+
+    def _zero(self):
+        """MuJoCo's compilation of the current copy at the zero posture (kept until a body moves)."""
+        if self._live is None:
+            import mujoco
+
+            model = mujoco.MjModel.from_xml_string(self.mjcf.to_xml_string(), self.mjcf.get_assets())
+            data = mujoco.MjData(model)
+            data.qpos[:] = model.qpos0
+            for name, angle in [(n, 0.0) for n in self.legmap.joint_names] + list(self.legmap.held_joints_rad.items()):
+                data.qpos[model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]] = angle
+            mujoco.mj_kinematics(model, data)
+            pelvis = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, self.legmap.pelvis)
+            self._live = (model, data, _inv(_pose(data.xmat[pelvis].reshape(3, 3), data.xpos[pelvis])))
+        return self._live
+
+    def export(self, workdir: Path, springs=()) -> LegMap:
+        """Write the copy (with its assets) into `workdir`, add the series `springs` ((leg
+        index, k) of `compliance`), and return the simulated robot's leg map on it."""
+        from dm_control import mjcf
+
+        self._live = None
+        model = self._zero()[0]  # the current copy (a joint_axis edit changes no body pose, yet counts here)
+        workdir.mkdir(parents=True, exist_ok=True)
+        name = f"{Path(self.legmap.mjcf).stem}_reality.xml"
+        mjcf.export_with_assets(self.mjcf, str(workdir), out_file_name=name)
+        _add_series_springs(workdir / name, self.legmap, list(springs), model)
+        # The edited MJCF is the model for Pinocchio too (a URDF robot's URDF is not edited).
+        return replace(self.legmap, mjcf=(workdir / name).resolve(), urdf=None)
+
+
 @dataclass
 class Reality:
     """The simulated robot and sensors with the effects applied, and the truth about them."""
@@ -161,18 +516,35 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
     simulator's set-up)."""
     effects = [parse_effect(s) for s in specs]
     rng = np.random.default_rng(np.random.SeedSequence([seed, 16]))
-    mount = np.array(sensors.errors.imu_mount_rpy)
-    scale = np.array(sensors.encoder_scale if sensors.encoder_scale else np.zeros(legmap.n_joints))
-    floor, truth, edits = {}, [], []
+    floor, truth, springs = {}, [], []
+    edit: ModelEdit | None = None
+
+    def model(spec: str) -> ModelEdit:
+        nonlocal edit
+        if edit is None:
+            edit = ModelEdit(sim_legmap, sensors, rng)
+        edit.spec = spec
+        return edit
+
     for e in effects:
         v = e.values
-        if e.kind == "imu_tilt":
+        if e.plugin is not None:
+            ed = model(e.spec)
+            ed.sensors = sensors
+            out = _plugin_truth(e, e.plugin().simulate(dict(v), ed))
+            sensors = ed.sensors
+            truth.append({"effect": e.spec, "kind": e.kind, **out})
+        elif e.kind == "imu_tilt":
+            mount = np.array(sensors.errors.imu_mount_rpy, dtype=float)
             mount[:2] += np.deg2rad([v["roll"], v["pitch"]])
+            sensors = replace(sensors, errors=replace(sensors.errors, imu_mount_rpy=tuple(float(x) for x in mount)))
             truth.append({"effect": e.spec, "kind": e.kind, "roll_rad": float(np.deg2rad(v["roll"])),
                           "pitch_rad": float(np.deg2rad(v["pitch"]))})
         elif e.kind == "encoder_scale":
             j = _resolve_joint(legmap, v["joint"], rng, e.spec)
+            scale = np.array(sensors.encoder_scale if sensors.encoder_scale else np.zeros(legmap.n_joints), float)
             scale[j] += v["scale"]
+            sensors = replace(sensors, encoder_scale=tuple(float(x) for x in scale) if np.any(scale) else ())
             truth.append({"effect": e.spec, "kind": e.kind, "joint": joint_label(legmap, j), "scale": v["scale"]})
         elif e.kind == "shim":
             side = _choice(v["side"], SIDES, rng, e.spec, "side")
@@ -196,90 +568,55 @@ def build_reality(legmap: LegMap, sim_legmap: LegMap, specs, sensors: SimSensors
             if side not in SIDES or part not in LINKS:
                 raise ConfigError(f"--effect {e.spec!r}: link {link!r} is not one of "
                                   f"{[f'{s}_{p}' for s in SIDES for p in LINKS]}")
+            axis = _choice(v["axis"], ABOUT, rng, e.spec, "axis") if e.kind == "link_offset" else None
+            ed = model(e.spec)
+            chain = ed.chain(side)
+            roles = [legmap.joint_roles[c] for c in chain]
+            k = roles.index("knee") if part == "thigh" else roles.index("knee") + 1
+            far = ed.joint_body(chain[k])  # the far joint's body: it and all below it move
+            u = ed.joint_anchor(chain[k])[0] - ed.joint_anchor(chain[k - 1])[0]  # the link's line, robot frame
+            u /= np.linalg.norm(u)
             if e.kind == "link_length":
-                edits.append(("link_length", (side, part, v["mm"] * 1e-3)))
+                ed.translate(far, u * v["mm"] * 1e-3)
                 truth.append({"effect": e.spec, "kind": e.kind, "link": link, "length_m": v["mm"] * 1e-3})
             elif e.kind == "link_offset":
-                axis = _choice(v["axis"], ABOUT, rng, e.spec, "axis")
-                edits.append(("link_offset", (side, part, np.eye(3)[ABOUT.index(axis)] * v["mm"] * 1e-3)))
+                ed.translate(far, np.eye(3)[ABOUT.index(axis)] * v["mm"] * 1e-3)
                 truth.append({"effect": e.spec, "kind": e.kind, "link": link, "axis": axis,
                               "offset_m": v["mm"] * 1e-3})
-            else:
-                edits.append(("link_twist", (side, part, np.deg2rad(v["deg"]))))
+            else:  # about the link's direction, through the far body's origin
+                ed.rotate(far, u * np.deg2rad(v["deg"]), ed.pose(far)[:3, 3])
                 truth.append({"effect": e.spec, "kind": e.kind, "link": link, "angle_rad": float(np.deg2rad(v["deg"]))})
+        elif e.kind in ("mount_offset", "joint_offset"):
+            if e.kind == "mount_offset":
+                side = _choice(v["side"], SIDES, rng, e.spec, "side")
+                j = model(e.spec).chain(side)[0]  # the leg's first joint, hip end
+            else:
+                j = _resolve_joint(legmap, v["joint"], rng, e.spec)
+            axis = _choice(v["axis"], ABOUT, rng, e.spec, "axis")
+            ed = model(e.spec)
+            ed.translate(ed.joint_body(j), np.eye(3)[ABOUT.index(axis)] * v["mm"] * 1e-3)
+            target = {"side": side} if e.kind == "mount_offset" else {}
+            truth.append({"effect": e.spec, "kind": e.kind, **target, "joint": joint_label(legmap, j),
+                          "body": ed.joint_body(j).name, "axis": axis, "offset_m": v["mm"] * 1e-3})
         elif e.kind in ("hip_axis", "joint_axis"):
             roles = ("hip_pitch", "hip_roll", "hip_yaw") if e.kind == "hip_axis" else None
             j = _resolve_joint(legmap, v["joint"], rng, e.spec, roles=roles)
             about = _choice(v["about"], ABOUT, rng, e.spec, "about")
-            edits.append(("joint_axis", (j, about, np.deg2rad(v["deg"]))))
+            joint = model(e.spec).mjcf.find("joint", legmap.joint_names[j])
+            axis = np.asarray(joint.axis if joint.axis is not None else (0, 0, 1), float)
+            joint.axis = (Rotation.from_rotvec(np.eye(3)[ABOUT.index(about)] * np.deg2rad(v["deg"])).as_matrix()
+                          @ axis).tolist()
             truth.append({"effect": e.spec, "kind": e.kind, "joint": joint_label(legmap, j), "about": about,
                           "angle_rad": float(np.deg2rad(v["deg"]))})
         elif e.kind == "compliance":
             j = _resolve_joint(legmap, v["joint"], rng, e.spec)
-            edits.append(("compliance", (j, v["k"])))
+            model(e.spec)
+            springs.append((j, v["k"]))
             truth.append({"effect": e.spec, "kind": e.kind, "joint": joint_label(legmap, j),
                           "stiffness_nm_per_rad": v["k"], "compliance_rad_per_nm": 1.0 / v["k"]})
-    sensors = replace(sensors, errors=replace(sensors.errors, imu_mount_rpy=tuple(float(x) for x in mount)),
-                      encoder_scale=tuple(float(x) for x in scale) if np.any(scale) else ())
-    if edits:
-        sim_legmap = _edited_model(sim_legmap, edits, Path(workdir))
+    if edit is not None:
+        sim_legmap = edit.export(Path(workdir), springs)
     return Reality(sim_legmap, sensors, floor, truth)
-
-
-def _edited_model(legmap: LegMap, edits: list, workdir: Path) -> LegMap:
-    """A copy of `legmap`'s MJCF with the edits, exported (with its assets) into `workdir`."""
-    import mujoco
-    import pinocchio as pin
-    from dm_control import mjcf
-
-    from legcal_bench.robots.kinematics import LegKinematics
-
-    kin = LegKinematics(legmap)
-    m = mjcf.from_path(str(legmap.mjcf))
-    compiled = mujoco.MjModel.from_xml_path(str(legmap.mjcf))
-    model, data = kin.model, kin.data
-    pin.forwardKinematics(model, data, kin.q_full(np.zeros(legmap.n_joints)))
-    pin.updateFramePlacements(model, data)
-
-    def body_rotation(name: str) -> np.ndarray:
-        return data.oMf[model.getFrameId(name, pin.FrameType.BODY)].rotation
-
-    for kind, args in edits:
-        if kind in ("link_length", "link_offset", "link_twist"):
-            side, part, delta = args
-            chain = [int(c) for c in kin.poe[side].cols]
-            roles = [legmap.joint_roles[c] for c in chain]
-            k = roles.index("knee") if part == "thigh" else roles.index("knee") + 1
-            joint = m.find("joint", legmap.joint_names[chain[k]])
-            u = kin.poe[side].M[k][:3, 3]  # joint k's anchor in joint k-1's frame (that body's axes)
-            u = u / np.linalg.norm(u)
-            prev_body = model.frames[model.getFrameId(legmap.joint_names[chain[k - 1]], pin.FrameType.JOINT)]
-            R_prev = data.oMi[prev_body.parentJoint].rotation
-            child = joint.parent
-            R_parent = body_rotation(child.parent.name) if child.parent.name else np.eye(3)
-            pos = np.asarray(child.pos if child.pos is not None else np.zeros(3), float)
-            if kind == "link_length":
-                child.pos = (pos + R_parent.T @ R_prev @ u * delta).tolist()
-            elif kind == "link_offset":  # delta: a vector in the robot's frame at the zero posture
-                child.pos = (pos + R_parent.T @ delta).tolist()
-            else:  # twist the child body (and its subtree) about the link's axis through its origin
-                R_child = body_rotation(child.name)
-                R_rel = R_parent.T @ R_child
-                turn = Rotation.from_rotvec(R_parent.T @ R_prev @ u * delta).as_matrix()
-                for attr in ("euler", "axisangle", "xyaxes", "zaxis"):
-                    setattr(child, attr, None)
-                child.quat = wxyz(Rotation.from_matrix(turn @ R_rel)).tolist()
-        elif kind == "joint_axis":
-            j, about, angle = args
-            joint = m.find("joint", legmap.joint_names[j])
-            axis = np.asarray(joint.axis if joint.axis is not None else (0, 0, 1), float)
-            R = Rotation.from_rotvec(np.eye(3)[ABOUT.index(about)] * angle).as_matrix()
-            joint.axis = (R @ axis).tolist()
-    workdir.mkdir(parents=True, exist_ok=True)
-    name = f"{Path(legmap.mjcf).stem}_reality.xml"
-    mjcf.export_with_assets(m, str(workdir), out_file_name=name)
-    _add_series_springs(workdir / name, legmap, [args for kind, args in edits if kind == "compliance"], compiled)
-    return replace(legmap, mjcf=(workdir / name).resolve())
 
 
 def _add_series_springs(path: Path, legmap: LegMap, springs: list, compiled) -> None:

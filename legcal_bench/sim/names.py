@@ -28,6 +28,11 @@ KINDS = {k.name: k for k in (
                "link bent: its far joint moved across (mm, robot frame at the zero posture)"),
     EffectKind("link_twist", {"link": ("link", None), "deg": ("number", None)},
                "link twisted about its long axis (deg)"),
+    EffectKind("mount_offset", {"side": ("side", None), "axis": ("about", "y"), "mm": ("number", None)},
+               "a hip's mounting point moved: the body of the leg's first joint (mm, robot frame at the zero "
+               "posture)"),
+    EffectKind("joint_offset", {"joint": ("joint", None), "axis": ("about", "y"), "mm": ("number", None)},
+               "a leg joint's body, and all below it, moved (mm, robot frame at the zero posture)"),
     EffectKind("compliance", {"joint": ("joint", None), "k": ("number", None)},
                "series spring between motor and link (N m/rad)"),
     EffectKind("shim", {"side": ("side", None), "roll": ("number", 0.0), "pitch": ("number", 0.0),
@@ -35,8 +40,13 @@ KINDS = {k.name: k for k in (
                "wedge under one sole (deg), in every session or only in one stance's (stance=NAME)"),
     EffectKind("slope", {"roll": ("number", 0.0), "pitch": ("number", 0.0)}, "floor slope (deg)"),
 )}
+# Effect plug-ins: classes of this entry-point group that set `sim_keys` also bring
+# their physics (`legcal_bench.sim.effects.ModelEdit`; docs/effect-plugins.md).
+EFFECT_GROUP = "legcal_bench.effects"
 EFFECTS_HELP = ("NAME:key=value,... with NAME one of " + "; ".join(
-    f"{k.name} ({', '.join(k.keys)}: {k.help})" for k in KINDS.values()))
+    f"{k.name} ({', '.join(k.keys)}: {k.help})" for k in KINDS.values())
+    + f"; or an installed effect plug-in with physics for simulation (entry-point group {EFFECT_GROUP}, "
+    "docs/effect-plugins.md)")
 
 # legcal_bench.sim.offsets parses these.
 PRESETS_HELP = ("none | paper | paper@<deg> | paper-base | random:<deg> | one radian per leg joint, comma-separated "
