@@ -47,7 +47,8 @@ from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry
-from legcal_bench.estimation.modelgap.lineartests import basis, chi2_after, identifiable, score_beyond
+from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable,
+                                                          score_beyond)
 from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
                                                          joint_columns, project_means, time_columns)
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
@@ -218,6 +219,7 @@ def inadmissible(ctx: Context, ev: Evaluated, names) -> list[str]:
 
 
 GENERIC = "generic geometry"
+SPARSE = "sparse geometry"  # the generic's sparsest description (`forward_selection`)
 
 
 def generic_fit(ctx: Context, base: Evaluated) -> dict:
@@ -239,6 +241,13 @@ def generic_fit(ctx: Context, base: Evaluated) -> dict:
     keep = identifiable(at0.Jw[:, :n_q], at0.Jw[:, n_q:], ctx.resolution) + n_q
     held = tuple(model.names[i] for i in range(n_q, model.n) if i not in set(keep))
     ev = polish(ctx, replace(start, held=held))
+    # The sparsest description of the same change (forward selection by the BIC's penalty
+    # per parameter): a candidate for the recommended offsets, which a change of a few
+    # parameters leaves far less noisy than the whole set; not a claim about which.
+    pick = forward_selection(at0.z, at0.Jw[:, :n_q], at0.Jw[:, n_q:], np.log(at0.n_rows), ctx.resolution)
+    sparse_cols = [n_q + j for j in pick]
+    sparse = polish(ctx, replace(start, held=tuple(model.names[i] for i in range(n_q, model.n)
+                                                   if i not in set(sparse_cols)))) if pick else None
     # Each family alone: the offsets and the family's own parameters, reduced by
     # themselves (a family may need a column the whole's reduction dropped for an
     # equivalent one of another family, e.g. the other leg's), fitted from `base`.
@@ -254,7 +263,11 @@ def generic_fit(ctx: Context, base: Evaluated) -> dict:
         p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
         families[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
                          "consistent": p >= ALPHA}
-    return {"ev": ev, "parameters": len(keep), "of": model.n - n_q, "families": families}
+    # Bounds judge the sparse fit's parameters, each one column; the whole's are base
+    # parameters, each the sum of the columns it absorbed, whose bounds are not its own.
+    return {"ev": ev, "sparse_ev": sparse, "inadmissible": [],
+            "sparse_inadmissible": [] if sparse is None else inadmissible(ctx, sparse, [e.name for e in effects]), "sparse": [model.names[i] for i in sparse_cols], "parameters": len(keep),
+            "of": model.n - n_q, "families": families}
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
@@ -412,7 +425,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     for c in _confound_entries(each):
         confounded.setdefault(c["effect"], c)
     held_by = {n: tuple(h for h in each["held"] if h.startswith(n + ".")) for n in tried}
-    fitted = []  # every admissible model fitted, for the recommendation: (label, ev)
+    fitted = []  # every model fitted, for the recommendation: (label, ev, why it is inadmissible)
     while significant and len(selected) < MAX_EFFECTS:
         rows = []
         for name in tried:
@@ -438,7 +451,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                 cv, _ = _cv(r["ev"])
                 r["cv_chi2"] = cv
                 r["passes_cv"] = bool(cv < cv_current)
-        fitted += [(" + ".join([*selected, r["effect"]]), r["ev"]) for r in rows if r["admissible"]]
+        fitted += [(" + ".join([*selected, r["effect"]]), r["ev"], r["inadmissible"]) for r in rows]
         steps.append({"on_top_of": list(selected), "cv_chi2_current": cv_current,
                       "candidates": [{k: v for k, v in r.items() if k != "ev"} for r in rows]})
         ok = sorted([r for r in passing if r["passes_cv"]], key=lambda r: r["bic"])
@@ -479,7 +492,9 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                        bic=g.chi2 + g.k * ln_n, explains=bool(g.p_value >= ALPHA / 2))
         if cv_base is not None:
             generic["cv_chi2"] = _cv(g)[0]
-        fitted.append((GENERIC, g))
+        fitted.append((GENERIC, g, generic["inadmissible"]))
+        if generic["sparse_ev"] is not None:
+            fitted.append((SPARSE, generic["sparse_ev"], generic["sparse_inadmissible"]))
         if selected and not set_aside:
             margin = generic["bic"] - (final.chi2 + final.k * ln_n)
             generic["bic_minus_selected"] = float(margin)
@@ -522,7 +537,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         "confounded": list(confounded.values()),
         "detection": detection,
         "after": after,
-        "generic": None if generic is None else {k: v for k, v in generic.items() if k != "ev"},
+        "generic": None if generic is None else {k: v for k, v in generic.items() if k not in ("ev", "sparse_ev")},
         "alpha": ALPHA,
         "noise": ctx.noise,
         "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,
@@ -551,21 +566,24 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
 
 
 def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, names) -> list[dict]:
-    """The recommendation's candidates: the offsets only, every admissible model fitted
-    (each at its optimum) and the generic geometry; each with its leave-one-stance-out
-    chi-square (None with one stance) and whether its effects are claimed."""
-    out = [{"name": "offsets only", "kind": "offsets", "effects": [], "ev": base, "cv_chi2": cv_base}]
+    """The recommendation's candidates: the offsets only, every model fitted (each at its
+    optimum; an inadmissible one listed with why, never recommended), the generic
+    geometry and its sparse description; each with its leave-one-stance-out chi-square
+    (None with one stance) and whether its effects are claimed."""
+    out = [{"name": "offsets only", "kind": "offsets", "effects": [], "ev": base, "cv_chi2": cv_base,
+            "inadmissible": []}]
     seen = {"offsets only"}
-    for label, ev in fitted:
+    for label, ev, bad in fitted:
         if label in seen:
             continue
         seen.add(label)
-        out.append({"name": label, "kind": "generic" if label == GENERIC else "effects",
-                    "effects": [] if label == GENERIC else label.split(" + "), "ev": ev,
-                    "cv_chi2": None if cv_base is None else _cv(ev)[0]})
+        geo = label in (GENERIC, SPARSE)
+        out.append({"name": label, "kind": "generic" if geo else "effects",
+                    "effects": [] if geo else label.split(" + "), "ev": ev, "inadmissible": list(bad),
+                    "cv_chi2": None if cv_base is None or bad else _cv(ev)[0]})
     for c in out:
         ev = c["ev"]
-        c.update(k=ev.k, chi2=ev.chi2, dof=ev.dof, admissible=True,
+        c.update(k=ev.k, chi2=ev.chi2, dof=ev.dof, admissible=not c["inadmissible"],
                  claimed=(c["kind"] == "offsets" or c["effects"] == list(selected)),
                  set_aside=set_aside.get(c["name"]),
                  offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))))
@@ -573,16 +591,17 @@ def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, nam
 
 
 def _recommend(cands: list[dict], verdict: str, selected) -> dict:
-    """The candidate with the lowest leave-one-stance-out chi-square (each training
-    stance predicted from the others): never the held-out sessions, which score it.
-    With one stance, no cross-validation: the selected model, else the offsets only."""
+    """The admissible candidate with the lowest leave-one-stance-out chi-square (each
+    training stance predicted from the others): never the held-out sessions, which score
+    it. With one stance, no cross-validation: the selected model, else the offsets only."""
     for c in cands:
         c["recommended"] = False
-    if all(c["cv_chi2"] is not None for c in cands):
-        best = min(cands, key=lambda c: c["cv_chi2"])
+    ok = [c for c in cands if c["admissible"]]
+    if all(c["cv_chi2"] is not None for c in ok):
+        best = min(ok, key=lambda c: c["cv_chi2"])
     else:
         label = " + ".join(selected)
-        best = next((c for c in cands if c["name"] == label), cands[0])
+        best = next((c for c in ok if c["name"] == label), cands[0])
     best["recommended"] = True
     return best
 

@@ -80,3 +80,31 @@ def identifiable(N: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> np.nd
     floor = max(resolution, RANK_RTOL) * np.linalg.norm(Cs, 2)
     k = int(np.sum(np.abs(np.diag(R)) > floor))
     return np.sort(live[piv[:k]])
+
+
+def forward_selection(z: np.ndarray, N: np.ndarray, C: np.ndarray, penalty: float, resolution: float = 0.0,
+                      max_columns: int = 12) -> list[int]:
+    """Columns of C added one at a time, each the one that lowers |z|^2 the most beyond
+    N and the columns chosen before it, while the drop exceeds `penalty` (per column: the
+    BIC's ln(n_rows)); a column whose residue beyond them is below `resolution` (relative
+    to its own norm) is not resolved by the data and never chosen. To first order about
+    the point z and the columns were taken at: the sparsest set of columns that explains
+    what the whole set would, found greedily."""
+    chosen: list[int] = []
+    norms = np.linalg.norm(C, axis=0)
+    floor = max(resolution, RANK_RTOL) * norms
+    while len(chosen) < max_columns:
+        Q = basis(np.concatenate([N, C[:, chosen]], axis=1))
+        r = z - Q @ (Q.T @ z)
+        Cp = C - Q @ (Q.T @ C)
+        res = np.linalg.norm(Cp, axis=0)
+        ok = (res > floor) & (norms > 0)
+        ok[chosen] = False
+        if not ok.any():
+            break
+        gain = np.where(ok, (Cp.T @ r) ** 2 / np.where(ok, res, 1.0) ** 2, -np.inf)
+        j = int(np.argmax(gain))
+        if gain[j] <= penalty:
+            break
+        chosen.append(j)
+    return chosen

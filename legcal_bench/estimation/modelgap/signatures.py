@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from legcal_bench.estimation.modelgap.effect_library import ImuTilt
+from legcal_bench.estimation.modelgap.effect_library import AXIS_TOLERANCE, LENGTH_TOLERANCE, ImuTilt
 from legcal_bench.estimation.modelgap.effects import Effect
 from legcal_bench.estimation.problem.residuals import project_mean
 from legcal_bench.robots.kinematics import LegKinematics
@@ -50,6 +50,12 @@ class LegGeometry(Effect):
 
     def parameters(self, kin: LegKinematics):
         return [(f"{place}_{c}", "m" if c[0] == "t" else "rad") for place, _ in self._places(kin) for c in TWIST]
+
+    def bounds(self, kin: LegKinematics):
+        """A link frame off by at most the library's tolerances: a length's in translation,
+        an axis's in rotation."""
+        return [(-LENGTH_TOLERANCE, LENGTH_TOLERANCE) if c[0] == "t" else (-AXIS_TOLERANCE, AXIS_TOLERANCE)
+                for _ in self._places(kin) for c in TWIST]
 
     def factors(self, kin: LegKinematics):
         places = self._places(kin)
