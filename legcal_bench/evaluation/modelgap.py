@@ -46,7 +46,7 @@ from scipy.stats import chi2 as chi2_dist
 from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
-from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry
+from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry, restricted
 from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable,
                                                           score_beyond)
 from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
@@ -91,6 +91,7 @@ class Evaluated:
     W: np.ndarray | None = None
     cov: np.ndarray | None = None
     rank: np.ndarray | None = None  # each frame's (kept frames)
+    extra: np.ndarray | None = None  # whitened columns beyond the model's (`generic_fit`)
 
     @property
     def k(self) -> int:
@@ -135,7 +136,11 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False, a
 
 
 POLISH_MAX_STEPS = 12
-POLISH_RTOL = 1e-9  # converged when one more step would lower the chi-square by less than this fraction
+# Converged when one more step would lower the chi-square by less than this (chi-square
+# units: a hundredth of what one degree of freedom adds on average; every decision here
+# turns on differences of several units).
+POLISH_TOL = 0.01
+POLISH_MAX_DAMPING = 8  # refused steps before giving up (the damping x10 each)
 
 
 class NestedFitError(RuntimeError):
@@ -144,33 +149,66 @@ class NestedFitError(RuntimeError):
     only ever steps downhill)."""
 
 
-def polish(ctx: Context, fit) -> Evaluated:
-    """The fit's model at its whitened optimum over every training frame: Gauss-Newton
-    steps of the noise-whitened problem (the generalized least squares) from `fit`, each
-    step halved until the chi-square goes down, so that it never goes up. Returns the
-    evaluation there (frames kept; `chi2` is |z|^2 at the point, `fit` the polished
-    fit). Every model the diagnosis compares is taken to this point: fits that each trim
-    their own frames and stop at their own tolerance are not comparable, and a nested
-    model could end above the model it extends."""
+def _box(ctx: Context, model) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) of every column of `model`: the offsets free, each effect's parameters
+    within its `bounds`."""
+    lo, hi = np.full(model.n, -np.inf), np.full(model.n, np.inf)
+    for e in model.effects:
+        sl = model.slices[e.name]
+        b = np.asarray(e.bounds(ctx.prep.kin), dtype=float).reshape(-1, 2)
+        lo[sl], hi[sl] = b[:, 0], b[:, 1]
+    return lo, hi
+
+
+def polish(ctx: Context, fit, box: bool = False) -> Evaluated:
+    """The fit's model at its whitened optimum over every training frame: damped
+    Gauss-Newton (Levenberg-Marquardt) steps of the noise-whitened problem (the
+    generalized least squares) from `fit`, a step taken only if the chi-square goes
+    down, so that it never goes up; the damping grows on a refused step (a model with
+    weakly identified parameters, the generic geometry's, would otherwise step far into
+    the nonlinear) and shrinks on a taken one. Returns the evaluation there (frames
+    kept; `chi2` is |z|^2 at the point, `fit` the polished fit). Every model the
+    diagnosis compares is taken to this point: fits that each trim their own frames and
+    stop at their own tolerance are not comparable, and a nested model could end above
+    the model it extends. With `box`, the effects' parameters stay within their bounds
+    (each step clipped to them): the generic geometry's weakly identified combinations
+    trade large opposite parameters for second-order effects otherwise (seen: a 42 mm
+    shank offset with 6.5 deg between knee and ankle for a shorter shank)."""
     segs = ctx.prep.segments
     free = _free_columns(fit)
     x = np.array(fit.x, dtype=float)
+    lo, hi = _box(ctx, fit.model) if box else (np.full(len(x), -np.inf), np.full(len(x), np.inf))
     ev = evaluate(ctx, replace(fit, x=x.copy()), segs, keep_frames=True, at_step=False)
+    lam = 0.0  # the damping, relative to each column's own curvature
     for _ in range(POLISH_MAX_STEPS):
-        if ev.chi2 - chi2_after(ev.z, ev.Jw) <= POLISH_RTOL * max(ev.chi2, 1.0):
+        if ev.chi2 - chi2_after(ev.z, ev.Jw) <= POLISH_TOL:
             break
-        t, better = 1.0, None
-        for _ in range(8):
+        H, g = ev.Jw.T @ ev.Jw, ev.Jw.T @ ev.z
+        d = np.diag(H).copy()
+        better = None
+        for _ in range(POLISH_MAX_DAMPING):
+            if lam > 0:
+                step = np.linalg.solve(H + lam * np.diag(d), g)
+            elif box and ev.k > TRUNCATE_ABOVE:  # no step along directions the data barely see
+                scale = np.sqrt(np.maximum(d, 1e-300))
+                step = np.linalg.lstsq(ev.Jw / scale, ev.z, rcond=GEOMETRY_RTOL)[0] / scale
+            else:
+                step = ev.step
             xn = x.copy()
-            xn[free] -= t * ev.step
+            xn[free] -= step
+            xn = np.clip(xn, lo, hi)
             cand = evaluate(ctx, replace(fit, x=xn), segs, keep_frames=True, at_step=False)
             if cand.chi2 < ev.chi2:
                 better = (xn, cand)
+                lam = 0.0 if lam <= 1e-4 else lam / 10
                 break
-            t /= 2
+            lam = max(10 * lam, 1e-4)
         if better is None:
             break
+        gain = ev.chi2 - better[1].chi2
         x, ev = better
+        if gain <= POLISH_TOL:
+            break
     return ev
 
 
@@ -219,46 +257,71 @@ def inadmissible(ctx: Context, ev: Evaluated, names) -> list[str]:
 
 
 GENERIC = "generic geometry"
+# The generic geometry's identifiable combinations (`identifiable`): a direction whose
+# residue beyond the offsets (and the directions kept before it) is below this share of
+# its own size is left out. Explaining a residual with it would take a parameter over a
+# hundred times the size of what it explains, beyond any build's tolerance (`bounds`),
+# and a fit with such directions steps far into the nonlinear (seen: chi2 from 2e4 to
+# 2e9 in one Gauss-Newton step at the resolution's 1e-4).
+GEOMETRY_RTOL = 1e-2
+# A polish with more free columns than this (the generic geometry's whole and its
+# families) steps only along the directions above GEOMETRY_RTOL of the largest (scaled
+# columns): their joint near-null directions, each column identifiable alone, step
+# into the nonlinear otherwise (seen: chi2 2e4 -> 1e12 from one Gauss-Newton step).
+TRUNCATE_ABOVE = 12 + 12
 SPARSE = "sparse geometry"  # the generic's sparsest description (`forward_selection`)
 
 
-def generic_fit(ctx: Context, base: Evaluated) -> dict:
+def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
     """The generic kinematic alternative (`generic_effects`: both legs' full geometry
     and the IMU's mount) from the offsets-only optimum `base`: its parameters reduced
     jointly, beyond the offsets, to the combinations these data identify (`identifiable`
-    at tracing's resolution; the others held at zero), then polished. Each family of
-    geometry changes (`GEOMETRY_FAMILIES`) is tested against it: the family's own
-    identifiable columns alone, fitted the same way, against the whole by a
-    likelihood-ratio test at ALPHA (consistent: not rejected)."""
-    effects = generic_effects()
-    model = EffectModel(ctx.prep.kin, effects)
-    bf = base.fit
-    names = tuple(e.name for e in effects)
-    start = ModelFit(names, model, model.vector({"offsets": bf.x[:model.n_offsets]}), bf.q_ref, (), None,
+    at tracing's resolution; the others fixed at zero, out of the model), then polished.
+    Each family of geometry changes (`GEOMETRY_FAMILIES`) is tested against it: the
+    family's own identifiable columns alone, fitted the same way, against the whole by a
+    likelihood-ratio test at ALPHA (consistent: not rejected). With `selected` (library
+    effects), how much of the sparse description's change those effects cannot express
+    (`outside_selected`, chi-square units, to first order about `base`)."""
+    kin, bf = ctx.prep.kin, base.fit
+    full = EffectModel(kin, generic_effects())
+    n_q = full.n_offsets
+    own = {e.name for e in full.effects}
+    with_selected = EffectModel(kin, full.effects + [e for e in load_effects(selected) if e.name not in own])
+
+    def fit(columns) -> Evaluated:  # the offsets and these columns of `full` (beyond the offsets), from `base`
+        model = EffectModel(kin, restricted(full, columns))
+        return polish(ctx, ModelFit(tuple(e.name for e in model.effects), model,
+                                    model.vector({"offsets": bf.x[:n_q]}), bf.q_ref, (), None, bf.segments), box=True)
+
+    m = with_selected
+    start = ModelFit(tuple(e.name for e in m.effects), m, m.vector({"offsets": bf.x[:n_q]}), bf.q_ref, (), None,
                      bf.segments)
     at0 = evaluate(ctx, start, ctx.prep.segments)
-    n_q = model.n_offsets
-    keep = identifiable(at0.Jw[:, :n_q], at0.Jw[:, n_q:], ctx.resolution) + n_q
-    held = tuple(model.names[i] for i in range(n_q, model.n) if i not in set(keep))
-    ev = polish(ctx, replace(start, held=held))
+    at0 = replace(at0, Jw=at0.Jw[:, :full.n], extra=at0.Jw)
+    keep = identifiable(at0.Jw[:, :n_q], at0.Jw[:, n_q:], GEOMETRY_RTOL) + n_q
+    ev = fit(keep)
     # The sparsest description of the same change (forward selection by the BIC's penalty
     # per parameter): a candidate for the recommended offsets, which a change of a few
     # parameters leaves far less noisy than the whole set; not a claim about which.
-    pick = forward_selection(at0.z, at0.Jw[:, :n_q], at0.Jw[:, n_q:], np.log(at0.n_rows), ctx.resolution)
-    sparse_cols = [n_q + j for j in pick]
-    sparse = polish(ctx, replace(start, held=tuple(model.names[i] for i in range(n_q, model.n)
-                                                   if i not in set(sparse_cols)))) if pick else None
+    pick = forward_selection(at0.z, at0.Jw[:, :n_q], at0.Jw[:, n_q:], np.log(at0.n_rows), GEOMETRY_RTOL)
+    sparse = fit([n_q + j for j in pick]) if pick else None
+    outside = None
+    if pick and selected:  # the sparse change (first order) beyond the offsets and the selected effects
+        A = at0.Jw[:, np.r_[np.arange(n_q), n_q + np.asarray(pick)]]
+        v = A[:, n_q:] @ np.linalg.lstsq(A, at0.z, rcond=None)[0][n_q:]
+        cols = [c for e in selected for c in range(m.slices[e].start, m.slices[e].stop)]
+        Q = basis(at0.extra[:, np.r_[np.arange(n_q), cols].astype(int)])
+        outside = float(np.sum((v - Q @ (Q.T @ v)) ** 2))
     # Each family alone: the offsets and the family's own parameters, reduced by
     # themselves (a family may need a column the whole's reduction dropped for an
     # equivalent one of another family, e.g. the other leg's), fitted from `base`.
     families = {}
     for fam, member in GEOMETRY_FAMILIES.items():
-        cols = np.array([i for i in range(n_q, model.n) if member(model.names[i])], dtype=int)
-        own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], ctx.resolution)] if len(cols) else cols
+        cols = np.array([i for i in range(n_q, full.n) if member(full.names[i])], dtype=int)
+        own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], GEOMETRY_RTOL)] if len(cols) else cols
         if not len(own):
             continue
-        f = polish(ctx, replace(start, held=tuple(model.names[i] for i in range(n_q, model.n) if i not in set(own))))
-        d = max(f.chi2 - ev.chi2, 0.0)
+        d = max(fit(own).chi2 - ev.chi2, 0.0)
         dof = len(keep) - len(own)
         p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
         families[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
@@ -266,8 +329,11 @@ def generic_fit(ctx: Context, base: Evaluated) -> dict:
     # Bounds judge the sparse fit's parameters, each one column; the whole's are base
     # parameters, each the sum of the columns it absorbed, whose bounds are not its own.
     return {"ev": ev, "sparse_ev": sparse, "inadmissible": [],
-            "sparse_inadmissible": [] if sparse is None else inadmissible(ctx, sparse, [e.name for e in effects]), "sparse": [model.names[i] for i in sparse_cols], "parameters": len(keep),
-            "of": model.n - n_q, "families": families}
+            "sparse_inadmissible": [] if sparse is None else
+            inadmissible(ctx, sparse, [e.name for e in sparse.fit.model.effects]),
+            "sparse": [full.names[n_q + j] for j in pick], "outside_selected": outside,
+            "parameters": len(keep), "of": full.n - n_q,
+            "families": families}
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
@@ -486,7 +552,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     generic = None
     if significant:
         say("fit + generic geometry (both legs and the IMU mount)")
-        generic = generic_fit(ctx, base)
+        generic = generic_fit(ctx, base, [] if set_aside else selected)
         g = generic["ev"]
         generic.update(chi2=g.chi2, dof=g.dof, chi2_per_dof=g.chi2 / g.dof, p_value=g.p_value,
                        bic=g.chi2 + g.k * ln_n, explains=bool(g.p_value >= ALPHA / 2))
@@ -496,15 +562,27 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         if generic["sparse_ev"] is not None:
             fitted.append((SPARSE, generic["sparse_ev"], generic["sparse_inadmissible"]))
         if selected and not set_aside:
-            margin = generic["bic"] - (final.chi2 + final.k * ln_n)
-            generic["bic_minus_selected"] = float(margin)
+            sel_bic = final.chi2 + final.k * ln_n
+            # The rivals a selection must beat by the decisive margin: the generic geometry,
+            # and its sparsest description when that is a change the selected effects
+            # cannot express (more than the margin of it beyond their span: a hip's
+            # mounting moved sideways is not a length change, though leg lengths absorb
+            # most of it).
+            rivals = [(GENERIC, generic["bic"])]
+            sp = generic["sparse_ev"]
+            if sp is not None and (generic["outside_selected"] or 0.0) > AMBIGUOUS_BIC:
+                generic["sparse_bic"] = sp.chi2 + sp.k * ln_n
+                rivals.append((f"{SPARSE} ({', '.join(generic['sparse'])})", generic["sparse_bic"]))
+            name, best = min(rivals, key=lambda r: r[1])
+            margin = best - sel_bic
+            generic["bic_minus_selected"] = float(generic["bic"] - sel_bic)
             if margin < -AMBIGUOUS_BIC:
-                set_aside[" + ".join(selected)] = (f"not singled out: a generic geometry change explains the data "
-                                                   f"better (BIC lower by {-margin:.0f})")
+                set_aside[" + ".join(selected)] = (f"not singled out: a change of geometry, the {name}, explains "
+                                                   f"the data better (BIC lower by {-margin:.0f})")
             elif margin < AMBIGUOUS_BIC:
                 ambiguous = [{"effect": " + ".join(selected), "bic_minus_best": max(margin, 0.0),
                               "remedy": "; ".join(load_effects([e])[0].remedy for e in selected)},
-                             {"effect": GENERIC, "bic_minus_best": max(-margin, 0.0),
+                             {"effect": name, "bic_minus_best": max(-margin, 0.0),
                               "remedy": "a measurement of the leg's geometry (a tape, a motion-capture pose) or "
                                         "stances that move the effect's signature apart from the geometry's"}]
     partial = list(selected) if set_aside else []
@@ -537,7 +615,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         "confounded": list(confounded.values()),
         "detection": detection,
         "after": after,
-        "generic": None if generic is None else {k: v for k, v in generic.items() if k not in ("ev", "sparse_ev")},
+        "generic": None if generic is None else {k: v for k, v in generic.items() if not k.endswith("ev")},
         "alpha": ALPHA,
         "noise": ctx.noise,
         "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,
@@ -661,13 +739,16 @@ def _recommended_text(rep: dict) -> str:
 
 
 def _signature_text(tracing: dict) -> str:
-    """The signature that explains the most of the residual (angle, load, motion, time), in words."""
-    best = max(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs),
-               key=lambda fs: fs[1]["excess"], default=None)
+    """The most significant signature (angle, load, motion, time) of the residual, in
+    words: by its p-value, not its excess chi-square, which favours the many-column time
+    signature on any residual."""
+    best = min(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs),
+               key=lambda fs: fs[1]["log10_p"], default=None)
     if best is None or best[1]["excess"] <= 0:
         return ""
     fam, sig = best
-    return f"; its strongest signature: {fam} of {sig['joint'].replace('_joint', '')} (excess chi2 {sig['excess']:.0f})"
+    what = "a drift in time within each segment" if fam == "time" else f"{fam} of {sig['joint'].replace('_joint', '')}"
+    return f"; its most significant signature: {what} (excess chi2 {sig['excess']:.0f}, log10 p {sig['log10_p']:.0f})"
 
 
 def trace(ctx: Context, ev: Evaluated) -> dict:

@@ -94,6 +94,48 @@ class Effect(ABC):
         raise NotImplementedError(f"effect {self.name}: no physics for simulation (sim_keys/simulate)")
 
 
+class Restricted(Effect):
+    """An effect with only some of its parameters (`keep`, indices into its
+    `parameters`); the others are fixed at zero and cost nothing to evaluate. Same name,
+    so its columns keep their names (`<effect>.<parameter>`)."""
+
+    def __init__(self, effect: Effect, keep):
+        self.effect, self.keep = effect, [int(i) for i in keep]
+        self.name, self.summary, self.needs_ft = effect.name, effect.summary, effect.needs_ft
+
+    def parameters(self, kin):
+        every = self.effect.parameters(kin)
+        return [every[i] for i in self.keep]
+
+    def bounds(self, kin):
+        every = self.effect.bounds(kin)
+        return [every[i] for i in self.keep]
+
+    def joint_map(self, kin, seg):
+        A = self.effect.joint_map(kin, seg)
+        return None if A is None else A[:, :, self.keep]
+
+    def factors(self, kin):
+        return [(side, after, np.asarray(g)[self.keep]) for side, after, g in self.effect.factors(kin)]
+
+    def imu_axes(self, kin):
+        ax = self.effect.imu_axes(kin)
+        return None if ax is None else np.asarray(ax)[self.keep]
+
+
+def restricted(model: "EffectModel", columns) -> list[Effect]:
+    """The effects of `model` restricted to the parameter columns `columns` (indices of
+    the model's columns, the offsets' first); effects left with none are dropped."""
+    cols = set(int(c) for c in columns)
+    out = []
+    for e in model.effects:
+        sl = model.slices[e.name]
+        keep = [i - sl.start for i in range(sl.start, sl.stop) if i in cols]
+        if keep:
+            out.append(Restricted(e, keep))
+    return out
+
+
 def registry() -> dict[str, type[Effect]]:
     """Effect classes by name: the entry-point group `legcal_bench.effects`. Read once
     per import path (`sys.path`): scanning the installed distributions costs ~10 ms, and

@@ -59,14 +59,13 @@ def score_beyond(z: np.ndarray, Qn: np.ndarray, C: np.ndarray, resolution: float
     return float(np.sum((Qc.T @ zp) ** 2)), int(Qc.shape[1])
 
 
-def identifiable(N: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> np.ndarray:
+def identifiable(N: np.ndarray, C: np.ndarray, rtol: float = RANK_RTOL) -> np.ndarray:
     """Indices of the columns of C that are identifiable beyond the nuisance columns N,
     jointly (FIGAROH's base parameters): a QR with column pivoting of C, each column
     scaled to unit norm and N projected out, keeps a pivot column while its residue
-    beyond N and the pivots before it exceeds `resolution` (`score`'s sense: relative to
-    C's largest singular value; `RANK_RTOL` at least). The others are combinations of
-    the kept ones and N, or below what the data resolve: held at zero, they are absorbed
-    by the kept ones."""
+    beyond N and the pivots before it exceeds `rtol` of its own norm. The others are
+    combinations of the kept ones and N, or too close to one to be fitted: held at zero,
+    they are absorbed by the kept ones."""
     from scipy.linalg import qr
 
     if C.shape[1] == 0:
@@ -77,22 +76,21 @@ def identifiable(N: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> np.nd
     Qn = basis(N)
     Cp = Cs - Qn @ (Qn.T @ Cs)
     _, R, piv = qr(Cp, mode="economic", pivoting=True)
-    floor = max(resolution, RANK_RTOL) * np.linalg.norm(Cs, 2)
-    k = int(np.sum(np.abs(np.diag(R)) > floor))
+    k = int(np.sum(np.abs(np.diag(R)) > max(rtol, RANK_RTOL)))
     return np.sort(live[piv[:k]])
 
 
-def forward_selection(z: np.ndarray, N: np.ndarray, C: np.ndarray, penalty: float, resolution: float = 0.0,
+def forward_selection(z: np.ndarray, N: np.ndarray, C: np.ndarray, penalty: float, rtol: float = RANK_RTOL,
                       max_columns: int = 12) -> list[int]:
     """Columns of C added one at a time, each the one that lowers |z|^2 the most beyond
     N and the columns chosen before it, while the drop exceeds `penalty` (per column: the
-    BIC's ln(n_rows)); a column whose residue beyond them is below `resolution` (relative
-    to its own norm) is not resolved by the data and never chosen. To first order about
+    BIC's ln(n_rows)); a column whose residue beyond them is below `rtol` of its own
+    norm is never chosen (`identifiable`'s sense). To first order about
     the point z and the columns were taken at: the sparsest set of columns that explains
     what the whole set would, found greedily."""
     chosen: list[int] = []
     norms = np.linalg.norm(C, axis=0)
-    floor = max(resolution, RANK_RTOL) * norms
+    floor = max(rtol, RANK_RTOL) * norms
     while len(chosen) < max_columns:
         Q = basis(np.concatenate([N, C[:, chosen]], axis=1))
         r = z - Q @ (Q.T @ z)

@@ -67,12 +67,20 @@ class LegGeometry(Effect):
         return out
 
 
+class ImuMount(ImuTilt):
+    """The IMU's mounting tilt as part of the generic alternative: the library's
+    `imu_tilt` under its own name, so that a fit may hold some of its parameters while
+    the IMU's noise keeps both of its directions (`legcal_bench.estimation.problem.fit.NOISE_TILT`)."""
+
+    name = "imu_mount"
+
+
 def generic_effects() -> list[Effect]:
     """The generic kinematic alternative: both legs' full geometry (`LegGeometry`) and
     the IMU's mount (its tilt), one model. The legs are one block: moving one hip by +d
     is, in inter-foot data, moving the other by -d, so they are reduced together
     (`legcal_bench.estimation.modelgap.lineartests.identifiable`)."""
-    return [LegGeometry("left"), LegGeometry("right"), ImuTilt()]
+    return [LegGeometry("left"), LegGeometry("right"), ImuMount()]
 
 
 # Families of geometry changes the generic fit is tested against (`family_columns`):
@@ -80,7 +88,7 @@ def generic_effects() -> list[Effect]:
 GEOMETRY_FAMILIES = {
     "link translations (mounting points, lengths, axis offsets)": lambda name: _part(name) == "t",
     "axis directions and link twists": lambda name: _part(name) == "r",
-    "the IMU's mount": lambda name: name.startswith("imu_tilt."),
+    "the IMU's mount": lambda name: name.startswith("imu_mount."),
     "the left leg's geometry": lambda name: name.startswith("leg_geometry_left."),
     "the right leg's geometry": lambda name: name.startswith("leg_geometry_right."),
 }
