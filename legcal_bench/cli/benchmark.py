@@ -178,7 +178,7 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     """The model-gap suite: diagnose every case, write modelgap/ under the leaderboard root,
     each case a file in modelgap/cases/ there (kept for a rerun of the same command)."""
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.modelgap import CASES, DEFAULT_CALIBRATOR, OUTSIDE_ROBOTS, RESULTS_NAME, markdown, run
+    from legcal_bench.benchmark.modelgap import CASES, DEFAULT_CALIBRATOR, RESULTS_NAME, markdown, run
     from legcal_bench.benchmark.plan import available
     from legcal_bench.errors import ConfigError
     from legcal_bench.files.reports import write_report
@@ -220,7 +220,7 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     t0 = time.perf_counter()
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
                multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
-               cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots or OUTSIDE_ROBOTS),
+               cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots) if a.outside_robots else None,
                calibrator=calibrator, out=Path(a.out) / RESULTS_NAME / "cases", command=made_by)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
@@ -250,8 +250,8 @@ def add_commands(sub) -> None:
                          "multi, outside (with its reference runs); default all (e.g. --cases clean library "
                          "--effect-seeds 20: the library effects with more seeds, beside their floor)")
     bn.add_argument("--outside-robots", nargs="+", default=None,
-                    help="modelgap suite: the robots (of --robots) the edits outside the library run on (default a3: "
-                         "~35 s a diagnosis)")
+                    help="modelgap suite: the robots (of --robots) the edits outside the library run on (default "
+                         "every robot run; 5 edits x --seeds each, ~15-60 s a diagnosis)")
     bn.add_argument("--calibrators", nargs="+", default=None,
                     help="only these registered calibrators (modelgap suite: the one whose offsets every diagnosis "
                          "starts from, default interfoot)")

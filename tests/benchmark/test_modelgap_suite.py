@@ -1,11 +1,16 @@
 """The model-gap suite's cases (issue #17): the near-threshold band and the several-
 effects case draw valid, seeded specs; the summary scores a selection of an effect that
-was not injected as a confident wrong attribution."""
+was not injected as a confident wrong attribution. Issue #41: the outside edits apply on
+every robot of the suite, and the done-when statistics count what they should."""
 
+import numpy as np
 import pytest
 
-from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, jobs, library_spec, markdown,
-                                             multi_effects, multi_specs, near_scale, summarize)
+from legcal_bench.benchmark import modelgap as mg
+from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, OUTSIDE, done_when, jobs,
+                                             library_spec, markdown, multi_effects, multi_specs, near_scale,
+                                             outside_spec, summarize)
+from legcal_bench.benchmark.suites import G1_EXAMPLE
 from legcal_bench.errors import ConfigError
 from legcal_bench.sim.effects import parse_effect
 
@@ -30,7 +35,8 @@ def test_every_case_records_the_stances_asked_and_each_kind_its_seeds():
     assert {j[4] for j in todo} == {("I", "II", "III", "IV", "tall")}
     kinds = [j[1] for j in todo]
     assert kinds.count("library") == 20 * len(LIBRARY) and kinds.count("clean") == 4
-    assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1 and kinds.count("outside") == 9
+    assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1
+    assert kinds.count("outside") == 3 * len(OUTSIDE) and kinds.count("reference") == 2 * len(OUTSIDE)
     assert {j[4] for j in jobs(["a3"], 1, 1, [], 0)} == {None}
 
 
@@ -87,3 +93,141 @@ def test_the_leaderboard_shows_the_suite_from_its_rows(tmp_path):
     assert "[modelgap/modelgap.md](modelgap/modelgap.md)" in text
     line = next(ln for ln in text.splitlines() if ln.startswith("| r | imu_tilt |"))
     assert "| 0/1 | 1 |" in line  # attributed wrongly, with confidence: counted as such
+
+
+@pytest.mark.parametrize("robot", ["a3", "a2", G1_EXAMPLE])
+def test_every_outside_edit_applies_on_every_robot_to_the_side_it_names(tmp_path, robot):
+    # Joint roles and link chains differ (the A2-like's hip order, the G1's bent thigh):
+    # each edit must resolve there, and move that side's sole (at the starting posture)
+    # by a sizeable share of its size, the other sole not at all.
+    from legcal_bench.robots import load_robot
+    from legcal_bench.robots.kinematics import LegKinematics
+    from legcal_bench.sim.effects import build_reality
+    from legcal_bench.sim.sensors import sim_sensors
+
+    lm = load_robot(robot)
+    nominal = LegKinematics(lm)
+    q = nominal.q_init()[None]
+    L0, R0 = nominal.sole_poses_batch(q)
+    for i, name in enumerate(OUTSIDE):
+        spec, side = outside_spec(name, i, robot=robot)
+        real = build_reality(lm, lm, [spec], sim_sensors("zero"), tmp_path / name).sim_legmap
+        L1, R1 = LegKinematics(real).sole_poses_batch(q)
+        (moved, m0), (still, s0) = ((L1, L0), (R1, R0)) if side == "left" else ((R1, R0), (L1, L0))
+        size = mg.outside_size(robot, name)
+        shift = np.linalg.norm(moved[0, :3, 3] - m0[0, :3, 3]) * 1e3  # mm
+        turn = np.degrees(np.arccos(np.clip((np.trace(moved[0, :3, :3] @ m0[0, :3, :3].T) - 1) / 2, -1, 1)))
+        assert shift > 0.2 * size or turn > 0.2 * size, (name, spec, shift, turn)
+        assert np.abs(still - s0).max() < 1e-9, (name, spec)
+
+
+def test_outside_sizes_are_per_robot_and_every_robot_runs_the_outside_group_by_default(monkeypatch, tmp_path):
+    assert outside_spec("shank_bent", 0, robot=G1_EXAMPLE)[0] == "link_offset:link=left_shank,axis=y,mm=2.5"
+    assert outside_spec("shank_bent", 1, robot="a3") == ("link_offset:link=right_shank,axis=y,mm=3", "right")
+    assert outside_spec("shank_bent", 1, mg.REFERENCE_SCALE, "a3")[0].endswith("mm=12")
+    assert outside_spec("shank_bent", 0, robot="pair_ryp")[0].endswith("mm=3")  # another robot: the A3-like's
+    asked = []
+    monkeypatch.setattr(mg, "jobs", lambda robots, seeds, clean_seeds, outside_robots, *a: asked.append(
+        outside_robots) or [])
+    monkeypatch.setattr(mg, "summarize", lambda rows: [])
+    mg.run(["a3", "a2", G1_EXAMPLE], workers=1, progress=False, out=tmp_path)
+    mg.run(["a3", "a2"], outside_robots=["a2", G1_EXAMPLE], workers=1, progress=False, out=tmp_path)
+    assert asked == [["a3", "a2", G1_EXAMPLE], ["a2"]]
+
+
+def _case(robot, kind, name, verdict, err, seed=0, selected=(), recommended=None, generic=None):
+    return {"robot": robot, "kind": kind, "name": name, "verdict": verdict, "selected": list(selected),
+            "ambiguous": [], "seed": seed, "side": "left", "spec": f"x:link=left_shank,mm={seed}",
+            "summary": f"{verdict} because", "offsets_rms_deg": {"before": 9.0, "after": 9.0, "recommended": err},
+            "recommended": recommended, "generic": generic, "confounded": [], "p_value": 0.5, "z": 0.0,
+            "localization": {"location": "left leg", "channel": "feet"}}
+
+
+def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
+    rows = [_case("r", "clean", None, "explained", e, seed=i) for i, e in enumerate((0.01, 0.02, 0.04))]
+    rows += [_case("r", "clean_kinematic", None, "explained", 5.0)]  # not the floor's
+    rows += [_case("r", "outside", "shank_bent", "selected", 0.02, 0, ["leg_length"], "leg_length"),
+             _case("r", "outside", "shank_bent", "ambiguous", 0.031, 1, recommended="offsets"),
+             _case("r", "outside", "shank_bent", "unexplained", 0.029, 2, recommended="generic",
+                   generic={"explains": True, "consistent": ["link translations"], "inconsistent": []}),
+             _case("r", "outside", "knee_axis_tilted", "explained", 0.01, 0),
+             _case("r", "outside", "knee_axis_tilted", "selected", 0.5, 1, ["compliance", "imu_tilt"])]
+    rows += [_case("r", "library", "imu_tilt", "selected", 0.02, s, ["imu_tilt"] if s else ["hip_axis"])
+             for s in range(20)]
+    rows += [_case("g", "clean", None, "explained", 0.1), _case("g", "outside", "shank_bent", "unexplained", 0.2)]
+    dw = done_when(rows)
+    r, g, t = dw["robots"]["r"], dw["robots"]["g"], dw["totals"]
+    assert r["floor_offsets_rms_deg"] == pytest.approx(0.02) and r["clean_cases"] == 3  # the median
+    bent, knee = r["edits"]
+    assert (bent["edit"], bent["selected"], bent["ambiguous"], bent["unexplained"], bent["explained"]) == (
+        "shank_bent", 1, 1, 1, 0)
+    assert bent["selected_effects"] == {"leg_length": 1} and bent["within"] == 2  # 0.031 > 1.5 x 0.02
+    assert bent["recommended"] == {"leg_length": 1, "offsets": 1, "generic": 1}
+    assert bent["generic_explains"] == 1 and bent["consistent"] == {"link translations": 1}
+    assert (knee["selected"], knee["explained"], knee["within"]) == (1, 1, 1)
+    assert knee["selected_effects"] == {"compliance": 1, "imu_tilt": 1}
+    assert r["within"] == 3 and r["outside"] == 5 and r["within_share"] == pytest.approx(0.6)
+    assert [(b["edit"], b["seed"]) for b in r["beyond"]] == [("shank_bent", 1), ("knee_axis_tilted", 1)]
+    assert r["beyond"][1]["over_floor"] == pytest.approx(25.0) and r["beyond"][1]["summary"] == "selected because"
+    assert r["library"] == {"imu_tilt": {"correct": 19, "seeds": 20, "met": True}}
+    assert g["within"] == 0 and g["library"] == {} and g["floor_offsets_rms_deg"] == 0.1  # 0.2 > 0.15
+    assert (t["outside"], t["selected"], t["ambiguous"], t["unexplained"], t["explained"]) == (6, 2, 1, 2, 1)
+    assert (t["within"], t["scored"], t["edits"], t["robots_with_outside"], t["fewest_seeds"]) == (3, 6, 2, 2, 1)
+    assert t["no_wrong_name"] is False and t["within_met"] is False and t["library_met"] is True
+    md = markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
+    assert "selected (a library effect named, wrongly) 2, ambiguous 1, unexplained 2, explained 1. No wrong " \
+           "name: NOT met." in md
+    assert "| r | 0.0200 (3) | 3/5 (60%) | imu_tilt 19/20 |" in md
+    assert "| r | shank_bent (`x:link=<side>_shank,mm=0`, `x:link=<side>_shank,mm=1`, `x:link=<side>_shank,mm=2`) | " \
+           "axis offset | 3 | 1 (leg_length 1) | 1 | 1 | 0 | leg_length 1, offsets 1, generic 1 | 1/3; link " \
+           "translations 1 |" in md
+    assert "- r, knee_axis_tilted seed 1 (left leg): 0.5000 deg, 25.00x the floor; recommended –; selected: " \
+           "selected because" in md
+    # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
+    rows[-3]["selected"] = ["leg_length"]
+    for r_ in rows:
+        for k in ("recommended", "generic"):
+            r_.pop(k)
+        r_["offsets_rms_deg"].pop("recommended")
+    dw = done_when(rows)
+    assert dw["robots"]["r"]["library"]["imu_tilt"] == {"correct": 18, "seeds": 20, "met": False}
+    assert dw["totals"]["library_met"] is False and dw["robots"]["r"]["floor_offsets_rms_deg"] == 9.0
+
+
+def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monkeypatch):
+    # run_case on a stubbed collection and diagnosis: the candidates' offsets scored
+    # against the injected truth; a report without candidates (before #41) still makes a row.
+    import types
+
+    from legcal_bench.evaluation import modelgap as ev
+
+    names = ["a", "b"]
+    legmap = types.SimpleNamespace(name="r", joint_names=names)
+    truth = types.SimpleNamespace(offsets=[0.0, 0.0])
+    monkeypatch.setattr(mg, "_collect", lambda *a, **k: (legmap, [], truth))
+    monkeypatch.setattr("legcal_bench.calibrators.base.calibrate_training",
+                        lambda cal, lm, recs: types.SimpleNamespace(offsets_vector=lambda n: np.zeros(2)))
+    monkeypatch.setattr(ev, "context", lambda lm, recs: types.SimpleNamespace(prep=None))
+    d = np.deg2rad(1.0)
+    rep = {"verdict": "unexplained", "selected": [], "poor_fit": [], "ambiguous": [], "summary": "s",
+           "detection": {"chi2_per_dof": 2.0, "p_value": 0.0, "z": 9.0}, "after": {"chi2_per_dof": 1.0},
+           "tracing": {"localization": {"location": "left leg", "channel": "feet"}}, "confounded": [],
+           "offsets_only_rad": {"a": d, "b": d}, "offsets_rad": {"a": 0.0, "b": d},
+           "candidates": [{"name": "offsets", "kind": "offsets", "effects": [], "offsets_rad": {"a": d, "b": d},
+                           "cv_chi2": 12.0, "admissible": True, "set_aside": None, "recommended": False},
+                          {"name": "generic", "kind": "generic", "effects": [], "offsets_rad": {"a": 0.0, "b": d},
+                           "cv_chi2": 10.0, "admissible": True, "set_aside": None, "recommended": True}],
+           "recommended": "generic", "generic": {"explains": True, "consistent": ["f"], "inconsistent": []}}
+    monkeypatch.setattr(ev, "diagnose", lambda *a, **k: rep)
+    row = mg.run_case("a3", "outside", "shank_bent", 0)
+    assert row["recommended"] == "generic" and row["generic"]["consistent"] == ["f"]
+    assert mg._generic({"explains": False, "families": {"a": {"consistent": True}, "b": {"consistent": False}}}) == {
+        "explains": False, "consistent": ["a"], "inconsistent": ["b"], "chi2_per_dof": None, "parameters": None}
+    assert [(c["name"], c["recommended"]) for c in row["candidates"]] == [("offsets", False), ("generic", True)]
+    assert [c["offsets_rms_deg"] for c in row["candidates"]] == pytest.approx([1.0, np.sqrt(0.5)])
+    assert row["offsets_rms_deg"]["recommended"] == pytest.approx(np.sqrt(0.5))
+    assert row["offsets_rms_deg"]["before"] == pytest.approx(1.0)
+    for k in ("candidates", "recommended", "generic"):
+        rep.pop(k)
+    row = mg.run_case("a3", "outside", "shank_bent", 0)
+    assert row["candidates"] == [] and row["recommended"] is None and row["generic"] is None
