@@ -261,7 +261,9 @@ def plot(report: dict, path: Path) -> Path:
     from legcal_bench.files.plots import pyplot, save_figure
 
     plt = pyplot()
-    fig, axes = plt.subplots(1, 4, figsize=(17, 3.6))
+    cands = [c for c in report.get("candidates", []) if c.get("cv_chi2") is not None]
+    cv = report["detection"].get("cross_validation", {})
+    fig, axes = plt.subplots(1, 5 if len(cands) > 1 and cv.get("dof") else 4, figsize=(22, 4.4))
     tr = [("offsets only", report["tracing"])]
     if report.get("tracing_after"):
         tr.append(("after (set aside: a poor fit)" if report.get("poor_fit") else "after", report["tracing_after"]))
@@ -280,7 +282,7 @@ def plot(report: dict, path: Path) -> Path:
                for s in ss}
         top = top or sorted(sig, key=lambda n: -sig[n])[:8]
         sig = [(n, sig.get(n, 0.0)) for n in top]
-        axes[3].barh(np.arange(len(sig)) + (k - 0.5) * w, [max(v, 1e-1) for _, v in sig], w, label=label)
+        axes[3].barh(np.arange(len(sig)) + (k - 0.5) * w, [max(v, 0.0) for _, v in sig], w, label=label)
         axes[3].set_yticks(np.arange(len(sig)), [n for n, _ in sig], fontsize=7)
     axes[0].axhline(1, color="k", lw=0.8, ls="--")
     axes[1].axhline(1, color="k", lw=0.8, ls="--")
@@ -288,8 +290,18 @@ def plot(report: dict, path: Path) -> Path:
     axes[1].set_title("chi2 / expected by stance", fontsize=9)
     axes[2].set_yscale("log")
     axes[2].set_title("where: excess chi2 explained (score test)", fontsize=9)
-    axes[3].set_xscale("log")
     axes[3].set_title("signatures: excess chi2 (score test)", fontsize=9)
+    if len(axes) == 5:  # the recommendation: each candidate's left-out chi2 / dof
+        ax = axes[4]
+        vals = [c["cv_chi2"] / cv["dof"] for c in cands]
+        colors = ["tab:green" if c["recommended"] else "0.6" if c.get("set_aside") else "tab:gray" for c in cands]
+        ax.barh(np.arange(len(cands)), vals, color=colors, hatch=None)
+        ax.set_yticks(np.arange(len(cands)), [c["name"] + (" (set aside)" if c.get("set_aside") else "")
+                                              for c in cands], fontsize=7)
+        ax.invert_yaxis()
+        ax.axvline(1, color="k", lw=0.8, ls="--")
+        ax.set_xlim(0.9 * min(min(vals), 1.0), 1.05 * max(vals))
+        ax.set_title("left-out chi2 / dof (green: recommended)", fontsize=9)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=7, frameon=False)  # clear of the bars
     import textwrap
