@@ -739,16 +739,16 @@ def _recommended_text(rep: dict) -> str:
 
 
 def _signature_text(tracing: dict) -> str:
-    """The most significant signature (angle, load, motion, time) of the residual, in
-    words: by its p-value, not its excess chi-square, which favours the many-column time
-    signature on any residual."""
-    best = min(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs),
-               key=lambda fs: fs[1]["log10_p"], default=None)
+    """The signature (angle, load, motion, time) explaining the most of the residual per
+    parameter it spends, in words: per parameter, since the time signature's many columns
+    (11 per segment) take a large share of any residual."""
+    best = max(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs if sig["dof"] > 0),
+               key=lambda fs: fs[1]["excess"] / fs[1]["dof"], default=None)
     if best is None or best[1]["excess"] <= 0:
         return ""
     fam, sig = best
     what = "a drift in time within each segment" if fam == "time" else f"{fam} of {sig['joint'].replace('_joint', '')}"
-    return f"; its most significant signature: {what} (excess chi2 {sig['excess']:.0f}, log10 p {sig['log10_p']:.0f})"
+    return f"; its strongest signature: {what} (excess chi2 {sig['excess']:.0f} on {sig['dof']} dof)"
 
 
 def trace(ctx: Context, ev: Evaluated) -> dict:
