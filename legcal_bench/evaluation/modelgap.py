@@ -312,28 +312,32 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
         cols = [c for e in selected for c in range(m.slices[e].start, m.slices[e].stop)]
         Q = basis(at0.extra[:, np.r_[np.arange(n_q), cols].astype(int)])
         outside = float(np.sum((v - Q @ (Q.T @ v)) ** 2))
-    # Each family alone: the offsets and the family's own parameters, reduced by
-    # themselves (a family may need a column the whole's reduction dropped for an
-    # equivalent one of another family, e.g. the other leg's), fitted from `base`.
-    families = {}
-    for fam, member in GEOMETRY_FAMILIES.items():
-        cols = np.array([i for i in range(n_q, full.n) if member(full.names[i])], dtype=int)
-        own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], GEOMETRY_RTOL)] if len(cols) else cols
-        if not len(own):
-            continue
-        d = max(fit(own).chi2 - ev.chi2, 0.0)
-        dof = len(keep) - len(own)
-        p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
-        families[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
-                         "consistent": p >= ALPHA}
+
+    def families() -> dict:
+        """Each family alone: the offsets and the family's own parameters, reduced by
+        themselves (a family may need a column the whole's reduction dropped for an
+        equivalent one of another family, e.g. the other leg's), fitted from `base`.
+        Five more fits: run only when a verdict needs them (`diagnose`)."""
+        out = {}
+        for fam, member in GEOMETRY_FAMILIES.items():
+            cols = np.array([i for i in range(n_q, full.n) if member(full.names[i])], dtype=int)
+            own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], GEOMETRY_RTOL)] if len(cols) else cols
+            if not len(own):
+                continue
+            d = max(fit(own).chi2 - ev.chi2, 0.0)
+            dof = len(keep) - len(own)
+            p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
+            out[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
+                        "consistent": p >= ALPHA}
+        return out
+
     # Bounds judge the sparse fit's parameters, each one column; the whole's are base
     # parameters, each the sum of the columns it absorbed, whose bounds are not its own.
     return {"ev": ev, "sparse_ev": sparse, "inadmissible": [],
             "sparse_inadmissible": [] if sparse is None else
             inadmissible(ctx, sparse, [e.name for e in sparse.fit.model.effects]),
             "sparse": [full.names[n_q + j] for j in pick], "outside_selected": outside,
-            "parameters": len(keep), "of": full.n - n_q,
-            "families": families}
+            "parameters": len(keep), "of": full.n - n_q, "families": None, "_families": families}
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
@@ -585,6 +589,8 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                              {"effect": name, "bic_minus_best": max(-margin, 0.0),
                               "remedy": "a measurement of the leg's geometry (a tape, a motion-capture pose) or "
                                         "stances that move the effect's signature apart from the geometry's"}]
+    if generic is not None and (set_aside or ambiguous or not selected):  # the verdict names the families
+        generic["families"] = generic["_families"]()
     partial = list(selected) if set_aside else []
     if ambiguous and selected:
         partial = list(selected)
@@ -615,7 +621,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         "confounded": list(confounded.values()),
         "detection": detection,
         "after": after,
-        "generic": None if generic is None else {k: v for k, v in generic.items() if not k.endswith("ev")},
+        "generic": None if generic is None else {k: v for k, v in generic.items() if not k.endswith("ev") and not k.startswith("_")},
         "alpha": ALPHA,
         "noise": ctx.noise,
         "rules": {"bic": "delta_chi2 > k ln(n_rows)", "n_rows": base.n_rows, "move_sigmas": MOVE_SIGMAS,

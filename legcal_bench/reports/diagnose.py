@@ -135,6 +135,8 @@ def _generic_section(report: dict) -> list[str]:
     if "bic_minus_selected" in g:
         L[-1] += (f" Its BIC minus the selected model's: {g['bic_minus_selected']:.0f} (an effect is claimed only "
                   f"when this is at least {report['rules']['ambiguous_bic']:g}).")
+    if g["families"] is None:
+        return L + ["", "(Families of geometry change not tested: the selection is claimed.)", ""]
     L += ["", "| family alone | parameters | delta chi2 vs the whole | dof | p | consistent |", "|---|---|---|---|---|---|"]
     for f, v in g["families"].items():
         L.append(f"| {f} | {v['parameters']} | {v['delta_chi2']:.1f} | {v['dof']} | {v['p_value']:.2g} | "
