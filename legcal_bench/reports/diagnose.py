@@ -153,7 +153,9 @@ def _candidates_section(report: dict, truth: dict | None) -> list[str]:
     tc = (truth or {}).get("candidates", {})
     L = ["## The recommended estimate", "",
          "Chosen among these candidates by leave-one-stance-out cross-validation on the training stances (each "
-         "stance predicted from the fit on the others); the held-out figures score the choice, they never make it.",
+         "stance predicted from the fit on the others; candidates within 10 of the lowest left-out chi2 are a tie, "
+         "resolved to the claimed selection, else the fewest parameters); inadmissible fits are never chosen. The "
+         "held-out figures score the choice, they never make it.",
          "", "| candidate | parameters | chi2 / dof | left-out chi2 / dof | held-out foot height (mm) | "
          "offsets error vs truth (deg) | status |", "|---|---|---|---|---|---|---|"]
     for c in cands:
