@@ -152,10 +152,10 @@ def _candidates_section(report: dict, truth: dict | None) -> list[str]:
     hh = (report.get("heldout_foot_height_mm") or {}).get("candidates", {})
     tc = (truth or {}).get("candidates", {})
     L = ["## The recommended estimate", "",
-         "Chosen among these candidates by leave-one-stance-out cross-validation on the training stances (each "
-         "stance predicted from the fit on the others; candidates within 10 of the lowest left-out chi2 are a tie, "
-         "resolved to the claimed selection, else the fewest parameters); inadmissible fits are never chosen. The "
-         "held-out figures score the choice, they never make it.",
+         "A claimed selection's own fit is the estimate. Otherwise it is chosen among these candidates by "
+         "leave-one-stance-out cross-validation on the training stances (each stance predicted from the fit on the "
+         "others; candidates within 10 of the lowest left-out chi2 are a tie, resolved to the fewest parameters); "
+         "inadmissible fits are never chosen. The held-out figures score the choice, they never make it.",
          "", "| candidate | parameters | chi2 / dof | left-out chi2 / dof | held-out foot height (mm) | "
          "offsets error vs truth (deg) | status |", "|---|---|---|---|---|---|---|"]
     for c in cands:

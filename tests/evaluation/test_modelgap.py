@@ -242,3 +242,28 @@ def test_an_inadmissible_fit_is_named_and_not_selected(tmp_path):
     ev.fit.x[i] = 0.05  # 5 cm: beyond the declared 1 cm
     bad = mg.inadmissible(ctx, ev, ["leg_length"])
     assert len(bad) == 1 and bad[0].startswith("leg_length.left_shank = 0.05") and "[-0.01, 0.01]" in bad[0]
+
+
+def test_the_recommendation_rule():
+    # A claimed selection's own fit; otherwise the lowest left-out chi2, a tie within 10
+    # going to the fewest parameters; an inadmissible candidate never (issue #41).
+    from legcal_bench.evaluation.modelgap import _recommend
+
+    def cands():
+        return [{"name": "offsets only", "k": 12, "cv_chi2": 500.0, "admissible": True},
+                {"name": "imu_tilt", "k": 13, "cv_chi2": 130.0, "admissible": True},
+                {"name": "compliance", "k": 18, "cv_chi2": 90.0, "admissible": False},
+                {"name": "generic geometry", "k": 50, "cv_chi2": 100.0, "admissible": True},
+                {"name": "sparse geometry", "k": 14, "cv_chi2": 108.0, "admissible": True}]
+
+    assert _recommend(cands(), "selected", ["imu_tilt"])["name"] == "imu_tilt"  # the claim, 30 worse or not
+    c = cands()
+    assert _recommend(c, "unexplained", [])["name"] == "sparse geometry"  # within 10 of 100, fewer parameters
+    assert [x["name"] for x in c if x["recommended"]] == ["sparse geometry"]
+    c = cands()
+    c[4]["cv_chi2"] = 111.0
+    assert _recommend(c, "unexplained", [])["name"] == "generic geometry"  # 11 worse: not a tie
+    c = cands()
+    for x in c:
+        x["cv_chi2"] = None
+    assert _recommend(c, "unexplained", [])["name"] == "offsets only"  # one stance: no cross-validation
