@@ -61,3 +61,10 @@ class HoldError(LegcalError):
 class LogImportError(LegcalError):
     """A robot log or its mapping file that cannot be imported; the message names the
     mapping field (or the log, topic, column) and the fix."""
+
+
+class NestedFitError(RuntimeError):
+    """A model fitted with more parameters ended above the model it extends
+    (`legcal_bench.evaluation.modelgap.nested`): a bug in the fit, not in the data or the
+    user's input (the extended fit starts at the smaller one's optimum and only ever
+    steps downhill), hence not a `LegcalError`."""

@@ -704,7 +704,9 @@ def markdown(data: dict, made_by: str, code: str) -> str:
                      f"{s['offsets_rms_deg_after']:.4f} | {_cell(s['floor_offsets_rms_deg'], 4)} | "
                      f"{_cell(s['after_over_floor'], 2)} | {v} |")
     rows = data.get("rows") or ()
-    if any(r["kind"] in ("outside", "library") for r in rows):
+    # Issue #41's statistics on rows the code since #41 made (they carry the diagnosis's
+    # candidates): runs made before it keep their pages as they were.
+    if any(r["kind"] in ("outside", "library") and "candidates" in r for r in rows):
         L += ["", *done_when_markdown(done_when(list(rows)))]
     return "\n".join(L) + "\n"
 

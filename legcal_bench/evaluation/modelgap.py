@@ -55,6 +55,7 @@ from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
 from legcal_bench.data.recording import training
+from legcal_bench.errors import NestedFitError
 from legcal_bench.estimation.problem.fit import (ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
                                                  whitened_rows)
 from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
@@ -141,12 +142,6 @@ POLISH_MAX_STEPS = 12
 # turns on differences of several units).
 POLISH_TOL = 0.01
 POLISH_MAX_DAMPING = 8  # refused steps before giving up (the damping x10 each)
-
-
-class NestedFitError(RuntimeError):
-    """A model fitted with more parameters ended above the model it extends: a bug in
-    the fit, not in the data (the extended fit starts at the smaller one's optimum and
-    only ever steps downhill)."""
 
 
 def _box(ctx: Context, model) -> tuple[np.ndarray, np.ndarray]:

@@ -139,7 +139,8 @@ def _case(robot, kind, name, verdict, err, seed=0, selected=(), recommended=None
     return {"robot": robot, "kind": kind, "name": name, "verdict": verdict, "selected": list(selected),
             "ambiguous": [], "seed": seed, "side": "left", "spec": f"x:link=left_shank,mm={seed}",
             "summary": f"{verdict} because", "offsets_rms_deg": {"before": 9.0, "after": 9.0, "recommended": err},
-            "recommended": recommended, "generic": generic, "confounded": [], "p_value": 0.5, "z": 0.0,
+            "recommended": recommended, "generic": generic, "candidates": [], "confounded": [], "p_value": 0.5,
+            "z": 0.0,
             "localization": {"location": "left leg", "channel": "feet"}}
 
 
