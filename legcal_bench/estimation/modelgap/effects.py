@@ -84,14 +84,12 @@ class Effect(ABC):
         return [(-np.inf, np.inf)] * len(self.parameters(kin))
 
     # Physics for simulation (optional): an effect that sets `sim_keys` ({key: (kind,
-    # default)}, kind "number" or "text") can be injected by `collect --effects
-    # <name>:key=value,...`; the simulator (`legcal_bench.sim.effects`) then calls
-    # `simulate(values, edit)` with the parsed values and a `legcal_bench.sim.effects.ModelEdit`
-    # (the simulated robot's MJCF to change) and records the dict it returns as the truth.
+    # default)}, kind "number" or "text") and defines `simulate(self, values, edit) ->
+    # dict` can be injected by `collect --effect <name>:key=value,...`; the simulator
+    # (`legcal_bench.sim.effects`, which refuses a class with one and not the other) calls
+    # it with the parsed values and a `legcal_bench.sim.effects.ModelEdit` (the simulated
+    # robot's MJCF to change) and records the dict it returns as the truth.
     sim_keys: dict | None = None
-
-    def simulate(self, values: dict, edit) -> dict:
-        raise NotImplementedError(f"effect {self.name}: no physics for simulation (sim_keys/simulate)")
 
 
 class Restricted(Effect):
