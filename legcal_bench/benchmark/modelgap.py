@@ -561,6 +561,8 @@ def done_when(rows: list[dict]) -> dict:
     estimate was recommended, and how many recommended offsets are within FLOOR_FACTOR x
     the floor (those beyond listed, with their verdict and summary: the why); each library
     effect's attribution (right / cases). {"robots": {robot: ...}, "totals": ...}."""
+    from legcal_bench.evaluation.modelgap import CONFOUNDED_OFFSETS  # a summary's why, for offsets off the floor
+
     out: dict = {}
     tot = {"outside": 0, "selected": 0, "ambiguous": 0, "unexplained": 0, "explained": 0, "scored": 0, "within": 0}
     for robot in dict.fromkeys(r["robot"] for r in rows):
@@ -590,7 +592,8 @@ def done_when(rows: list[dict]) -> dict:
                 if not ok:
                     beyond.append({"edit": o, "seed": r["seed"], "side": r.get("side"), "verdict": r["verdict"],
                                    "recommended": r.get("recommended"), "offsets_rms_deg": _recommended(r),
-                                   "over_floor": _recommended(r) / floor, "summary": r.get("summary", "")})
+                                   "over_floor": _recommended(r) / floor, "summary": r.get("summary", ""),
+                                   "says_why": CONFOUNDED_OFFSETS in r.get("summary", "")})
         library = {}
         for e in LIBRARY:
             rs = [r for r in rr if r["kind"] == "library" and r["name"] == e]
@@ -615,6 +618,8 @@ def done_when(rows: list[dict]) -> dict:
                fewest_seeds=min((e["seeds"] for v in out.values() for e in v["edits"]), default=0),
                no_wrong_name=tot["selected"] == 0,
                within_met=None if not tot["scored"] else tot["within"] >= WITHIN_SHARE * tot["scored"] - 1e-9,
+               beyond=sum(len(v["beyond"]) for v in out.values()),
+               beyond_say_why=sum(b["says_why"] for v in out.values() for b in v["beyond"]),
                library_met=all(x["met"] for x in lib) if lib else None)
     return {"robots": out, "totals": tot}
 
@@ -725,7 +730,9 @@ def done_when_markdown(dw: dict) -> list[str]:
               f"effect named, wrongly) {t['selected']}, ambiguous {t['ambiguous']}, unexplained {t['unexplained']}, "
               f"explained {t['explained']}. No wrong name: {met(t['no_wrong_name'])}.",
               f"- Recommended offsets within {FLOOR_FACTOR:g}x the robot's clean floor: {t['within']}/{t['scored']} "
-              f"({share}; asked: {WITHIN_SHARE:.0%}): {met(t['within_met'])}."]
+              f"({share}; asked: {WITHIN_SHARE:.0%}): {met(t['within_met'])}; of the {t['beyond']} beyond, "
+              f"{t['beyond_say_why']} say why (the recommended model's offsets noisier than the offsets-only's, "
+              f"saying the change it adds is partly confounded with the offsets)."]
     if t["library_met"] is not None:
         L.append(f"- Library attribution at least {ATTRIBUTION_SHARE:.0%} (19/20) per effect per robot: "
                  f"{met(t['library_met'])}.")

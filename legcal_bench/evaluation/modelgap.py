@@ -50,7 +50,7 @@ from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, l
 from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable,
                                                           score_beyond)
 from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
-                                                         joint_columns, project_means, time_columns)
+                                                         is_tilt, joint_columns, project_means, time_columns)
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
@@ -232,6 +232,8 @@ def _std(ev: Evaluated) -> np.ndarray:
     return std
 
 
+NOISIER = 1.2  # a recommended model's offsets noisier than the offsets-only's by more than this: said, with why
+CONFOUNDED_OFFSETS = "partly confounded with the offsets"  # ... in these words (the model-gap suite counts them)
 ADMISSIBLE_SIGMAS = 3.0  # a value outside its effect's bounds by more than this many stds is inadmissible
 
 
@@ -293,15 +295,19 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
                      bf.segments)
     at0 = evaluate(ctx, start, ctx.prep.segments)
     at0 = replace(at0, Jw=at0.Jw[:, :full.n], extra=at0.Jw)
-    keep = identifiable(at0.Jw[:, :n_q], at0.Jw[:, n_q:], GEOMETRY_RTOL) + n_q
+    # The whole and its families over the twists only: the axis tilts add no direction
+    # to them, only sparser names for the sparse description (`LegGeometry`).
+    twists = np.array([i for i in range(n_q, full.n) if not is_tilt(full.names[i])], dtype=int)
+    keep = twists[identifiable(at0.Jw[:, :n_q], at0.Jw[:, twists], GEOMETRY_RTOL)]
     ev = fit(keep)
     # The sparsest description of the same change (forward selection): a candidate for
     # the recommended offsets, which a change of a few parameters leaves far less noisy
     # than the whole set; not a claim about which. Each column must pay the extended
     # BIC's penalty, ln(n_rows) + 2 ln(columns to choose from) (Chen & Chen 2008): the
-    # best of ~86 columns beats the plain ln(n_rows) on noise alone about once in seven
-    # sets (seen: a lengthened shank's sparse description picking up a second, spurious
-    # column, which then out-scored leg_length by BIC in 3 of 40 library sets).
+    # best of ~86 columns (110 with the axis tilts on 6-joint legs) beats the plain
+    # ln(n_rows) on noise alone about once in seven sets (seen: a lengthened shank's
+    # sparse description picking up a second, spurious column, which then out-scored
+    # leg_length by BIC in 3 of 40 library sets).
     penalty = np.log(at0.n_rows) + 2 * np.log(full.n - n_q)
     pick = forward_selection(at0.z, at0.Jw[:, :n_q], at0.Jw[:, n_q:], penalty, GEOMETRY_RTOL)
     sparse = fit([n_q + j for j in pick]) if pick else None
@@ -320,7 +326,7 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
         Five more fits: run only when a verdict needs them (`diagnose`)."""
         out = {}
         for fam, member in GEOMETRY_FAMILIES.items():
-            cols = np.array([i for i in range(n_q, full.n) if member(full.names[i])], dtype=int)
+            cols = np.array([i for i in twists if member(full.names[i])], dtype=int)
             own = cols[identifiable(at0.Jw[:, :n_q], at0.Jw[:, cols], GEOMETRY_RTOL)] if len(cols) else cols
             if not len(own):
                 continue
@@ -372,12 +378,6 @@ def context(robot, recordings, prep: Prepared | None = None) -> Context:
              "tilt_used_rad": sigma_t}
     return Context(prep, sig["encoder"], sigma_t, {r.name: r for r in recordings},
                    max(sig["feet_rotation"], sig["flat_normal"]), noise)
-
-
-def _offsets_sigma(ev: Evaluated) -> np.ndarray:
-    """Noise-only standard deviations of the offsets (the offsets-only model)."""
-    H = ev.Jw.T @ ev.Jw
-    return np.sqrt(np.diag(np.linalg.pinv(H))[:ev.fit.model.n_offsets])
 
 
 def _cv(ev: Evaluated) -> tuple[float, int]:
@@ -470,7 +470,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     base_fit = fit_model(ctx.prep, start=start)
     n_q = base_fit.model.n_offsets  # the offsets' columns (one per leg joint) lead every model's
     base = polish(ctx, base_fit)
-    sigma0 = _offsets_sigma(base)
+    sigma0 = _std(base)[:n_q]  # the offsets-only model's noise std of each offset
     ln_n = float(np.log(base.n_rows))
     detection = {"chi2": base.chi2, "dof": base.dof, "chi2_per_dof": base.chi2 / base.dof,
                  "z": (base.chi2 - base.dof) / np.sqrt(2 * base.dof), "p_value": base.p_value}
@@ -670,7 +670,8 @@ def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, nam
         c.update(k=ev.k, chi2=ev.chi2, dof=ev.dof, admissible=not c["inadmissible"],
                  claimed=(c["kind"] == "offsets" or c["effects"] == list(selected)),
                  set_aside=set_aside.get(c["name"]),
-                 offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))))
+                 offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))),
+                 offsets_std_rms_rad=float(np.sqrt(np.mean(_std(ev)[:ev.fit.model.n_offsets] ** 2))))
     return out
 
 
@@ -754,7 +755,15 @@ def _recommended_text(rep: dict) -> str:
     why = ("the claimed selection's" if rec.get("claimed") and rep.get("selected") else
            "best leave-one-stance-out chi2, ties within 10 to the fewest parameters" if rec.get("cv_chi2") is not None
            else "one stance: no cross-validation")
-    return f"; recommended offsets: {rec['name']}'s ({why})"
+    text = f"; recommended offsets: {rec['name']}'s ({why})"
+    base = next((c for c in rep["candidates"] if c.get("kind") == "offsets"), None)
+    if rec.get("kind") != "offsets" and base and rec.get("offsets_std_rms_rad") and base.get("offsets_std_rms_rad"):
+        ratio = rec["offsets_std_rms_rad"] / base["offsets_std_rms_rad"]
+        if ratio > NOISIER:
+            text += (f"; their noise {np.rad2deg(rec['offsets_std_rms_rad']):.4f} deg RMS, {ratio:.1f}x the "
+                     f"offsets-only model's: the change it adds is {CONFOUNDED_OFFSETS}, which these data then "
+                     f"determine less well")
+    return text
 
 
 def _signature_text(tracing: dict) -> str:

@@ -170,6 +170,7 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
     assert r["within"] == 3 and r["outside"] == 5 and r["within_share"] == pytest.approx(0.6)
     assert [(b["edit"], b["seed"]) for b in r["beyond"]] == [("shank_bent", 1), ("knee_axis_tilted", 1)]
     assert r["beyond"][1]["over_floor"] == pytest.approx(25.0) and r["beyond"][1]["summary"] == "selected because"
+    assert [b["says_why"] for b in r["beyond"]] == [False, False] and t["beyond"] == 3 and t["beyond_say_why"] == 0
     assert r["library"] == {"imu_tilt": {"correct": 19, "seeds": 20, "met": True}}
     assert g["within"] == 0 and g["library"] == {} and g["floor_offsets_rms_deg"] == 0.1  # 0.2 > 0.15
     assert (t["outside"], t["selected"], t["ambiguous"], t["unexplained"], t["explained"]) == (6, 2, 1, 2, 1)
@@ -184,6 +185,11 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
            "translations 1 |" in md
     assert "- r, knee_axis_tilted seed 1 (left leg): 0.5000 deg, 25.00x the floor; recommended –; selected: " \
            "selected because" in md
+    # A beyond case whose summary says its offsets are confounded counts as saying why.
+    rows[5]["summary"] = "unexplained; recommended offsets: generic's; the change it adds is partly confounded " \
+                         "with the offsets"
+    assert done_when(rows)["totals"]["beyond_say_why"] == 1
+    assert "of the 3 beyond, 1 say why" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
     rows[-3]["selected"] = ["leg_length"]
     for r_ in rows:
