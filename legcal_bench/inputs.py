@@ -26,6 +26,24 @@ from legcal_bench.errors import ConfigError
 SEED_MAX = 2**32 - 1  # numpy's legacy seeding and MuJoCo's take a 32-bit unsigned seed
 
 
+def shown(value) -> str:
+    """A value as a message shows it: null, or its repr, shortened to 80 characters."""
+    if value is None:
+        return "null"
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+def is_finite_number(value) -> bool:
+    """A finite int or float (not a bool, a string, or an int too large for a float)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def number(field: str, value, *, low: float | None = None, high: float | None = None, low_open: bool = False,
            high_open: bool = False, integer: bool = False, fix: str = "") -> float | int:
     """`value` as a finite number (an int with `integer`) within [low, high] (open at an
