@@ -10,11 +10,12 @@ core the session collector records with.
 
 ## Action space
 `Box(6)`: the pelvis posture in the stance frame, [x, y, z, roll, pitch, yaw] (m, rad),
-bounded to ±0.25 leg lengths in x and y, 0.6-1.0 leg lengths in z and ±0.4 rad. It is
-mapped through the nominal model's closed-chain IK to joint targets, so every action
-keeps both feet planted; a posture out of reach (or past a joint limit) is not
-applied and `info["posture_reachable"]` is False. In the `standing` stance the legs
-are straight and the action is ignored.
+bounded to ±0.25 leg lengths in x and y, 0.6-1.0 leg lengths in z and ±0.4 rad (a finite
+action past the bounds is clipped to them; a NaN or infinite entry, or a length other
+than 6, is refused with `ConfigError`). It is mapped through the nominal model's
+closed-chain IK to joint targets, so every action keeps both feet planted; a posture
+out of reach (or past a joint limit) is not applied and `info["posture_reachable"]`
+is False. In the `standing` stance the legs are straight and the action is ignored.
 
 ## Observation space
 `Dict`: `q_enc` (n,) rad in leg-map order (n = the robot's leg joints, `legmap.n_joints`:
@@ -53,7 +54,13 @@ another model with the same joints), `mjcf`, `rate_hz` (logging rate, also
 `render_fps`), `physics_dt`, `offset_seed`, `knee_straight_error_rad`, `settle_s`,
 `information_reward`, `render_mode` (`rgb_array`), `standing` (the standing controller,
 as `collect --standing`: `auto`, the default, runs `cop` on a contact floor for a robot
-with ankle force/torque sensors; docs/contact-floor.md).
+with ankle force/torque sensors; docs/contact-floor.md). Each is checked at construction
+(`gym.make` too) and a bad one raises `ConfigError` naming it and the fix: `rate_hz` in
+[1, 1e5] Hz and `physics_dt` in [1e-5, 0.01] s, one logging period a whole number of
+physics steps (`legcal_bench.sim.double_support.physics_timing`); `offset_seed` a 32-bit unsigned
+integer; `knee_straight_error_rad` within ±0.1; `settle_s` in [0, 60]; a misspelt
+argument is named with the closest one. An action of the wrong length, not numbers
+or not finite is refused at `step` the same way.
 
 ## Version History
 * v0: the first version (static double support with kinematic, weld and contact floors).
@@ -69,7 +76,8 @@ from typing import Any
 import numpy as np
 from gymnasium import spaces
 
-from legcal_bench.envs.base import MujocoEnv
+from legcal_bench import inputs
+from legcal_bench.envs.base import MujocoEnv, named
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.estimation.information.gain import InformationGain
 from legcal_bench.protocol.servos import servo_gains
@@ -77,12 +85,16 @@ from legcal_bench.protocol.collect import CollectConfig, standing_controller
 from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, posture_bounds, settled_placement
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.legmap import LegMap
-from legcal_bench.sim.double_support import DoubleSupportSim
+from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
 from legcal_bench.sim.sensors import SensorModel, SimSensors, sim_sensors
+from legcal_bench.sim.standing import STANDING_CONTROLLERS
 
 RESET_OPTIONS = ("stance", "jitter_m", "jitter_rad")
+KNEE_ERROR_MAX_RAD = 0.1  # the standing knee's error from straight, either way (a few mrad is realistic)
+SETTLE_MAX_S = 60.0  # a reset's settling time: every reset simulates it
+JITTER_MAX_M, JITTER_MAX_RAD = 0.1, 0.5  # a placement jitter beyond these does not keep a stance
 
 
 def _as_legmap(robot: str | LegMap, mjcf=None) -> LegMap:
@@ -91,6 +103,7 @@ def _as_legmap(robot: str | LegMap, mjcf=None) -> LegMap:
 
 class StaticDoubleSupportEnv(MujocoEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+    action_doc = "the pelvis posture [x, y, z, roll, pitch, yaw] in the stance frame (m, rad)"
 
     def __init__(
         self,
@@ -108,16 +121,29 @@ class StaticDoubleSupportEnv(MujocoEnv):
         information_reward: bool = True,
         render_mode: str | None = None,
         standing: str = "auto",
+        **unknown,
     ):
+        self._refuse_unknown(unknown)
         if robot is None:
             raise LegMapError("robot: give a built-in name or the path of a leg map, e.g. "
                               "gym.make('legcal/StaticDoubleSupport-Path-v0', robot='path/to/robot.legmap.yaml')")
-        if mode not in MODES:
-            raise ConfigError(f"mode {mode!r}: use one of {MODES}")
+        mode = inputs.choice("mode", mode, MODES)
+        rate_hz, physics_dt, _ = physics_timing(rate_hz, physics_dt)
+        offset_seed = inputs.seed("offset_seed", offset_seed)
+        knee_straight_error_rad = inputs.number(
+            "knee_straight_error_rad", knee_straight_error_rad, low=-KNEE_ERROR_MAX_RAD, high=KNEE_ERROR_MAX_RAD,
+            fix="the true straight knee's angle past the leg map's knee_straight, in radians, e.g. 0.005")
+        settle_s = inputs.non_negative("settle_s", settle_s, high=SETTLE_MAX_S,
+                                       fix="seconds the servos settle after a reset, e.g. 3")
+        if not isinstance(information_reward, (bool, np.bool_)):
+            raise ConfigError(f"information_reward = {information_reward!r}: give True (the reward is the frame's "
+                              "information gain) or False (0)")
+        standing = inputs.choice("standing", standing, ("auto", *STANDING_CONTROLLERS))
         legmap = _as_legmap(robot, mjcf)
-        sim_legmap = legmap if sim_robot is None else _as_legmap(sim_robot)
+        sim_legmap = legmap if sim_robot is None else named("sim_robot", _as_legmap, sim_robot)
+        offsets = named("offsets", resolve_offsets, offsets, legmap, np.random.default_rng(offset_seed))
         self.sim = DoubleSupportSim(
-            legmap, mode, resolve_offsets(offsets, legmap, np.random.default_rng(offset_seed)), sim_sensors(sensors),
+            legmap, mode, offsets, named("sensors", sim_sensors, sensors),
             sim_legmap=sim_legmap, rate_hz=rate_hz, physics_dt=physics_dt,
             knee_straight_error_rad=knee_straight_error_rad, settle_s=settle_s,
             servo_gains=servo_gains(sim_legmap) if mode != "kinematic" else None,
@@ -141,12 +167,13 @@ class StaticDoubleSupportEnv(MujocoEnv):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         options = self._reset_options(options, RESET_OPTIONS)
-        name = options.get("stance", "I")
-        if name not in ALL_STANCES:
-            raise ConfigError(f"reset option stance={name!r}: use one of {list(ALL_STANCES)}")
+        name = inputs.choice("reset option stance", options.get("stance", "I"), ALL_STANCES)
+        jitter_m = inputs.non_negative("reset option jitter_m", options.get("jitter_m", 0.015), high=JITTER_MAX_M,
+                                       fix="the largest random shift of each sole, metres")
+        jitter_rad = inputs.non_negative("reset option jitter_rad", options.get("jitter_rad", 0.05),
+                                         high=JITTER_MAX_RAD, fix="the largest random yaw of each sole, radians")
         self.placement = settled_placement(fit_stance(ALL_STANCES[name], self.sim.nominal).stance, self.sim.true_kin,
-                                           self.np_random, float(options.get("jitter_m", 0.015)),
-                                           float(options.get("jitter_rad", 0.05)))
+                                           self.np_random, jitter_m, jitter_rad)
         self.sim.reset(self.placement.left, self.placement.right, self.placement.nominal, standing=name == "standing")
         obs = self.sim.observe(self.np_random)
         if self._information is not None:
@@ -155,8 +182,9 @@ class StaticDoubleSupportEnv(MujocoEnv):
         return obs, self._info()
 
     def step(self, action):
-        posture = np.clip(np.asarray(action, dtype=np.float64).reshape(6), self.action_space.low,
-                          self.action_space.high)
+        """ConfigError for an action of the wrong length, not numbers or not finite; a
+        finite one outside the action space is clipped to it."""
+        posture = np.clip(self._action(action), self.action_space.low, self.action_space.high)
         self.sim.step(posture)
         obs = self.sim.observe(self.np_random)
         reward = self._information.add(obs["q_enc"], obs["imu_acc"]) if self._information is not None else 0.0

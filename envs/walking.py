@@ -55,7 +55,9 @@ policy spec: its gains, default pose and rates configure the servos; the policy 
 is run by `legcal_bench.evaluation.walk`), `offsets`, `correction`, `sensors` (`zero`,
 `realistic`, `calibrated-imu` or a sensor-model dict), `offset_seed` (for `random:`),
 `mjcf`, `walking` (a `WalkingConfig`, overriding the spec's), `render_mode`
-(`rgb_array`).
+(`rgb_array`), `width`, `height`. A bad argument raises `ConfigError` naming it and the
+fix at construction (`gym.make` too), and an action of the wrong length, not numbers
+or not finite at `step`; finite targets past the action space go to the servos as given.
 
 ## Version History
 * v0: the first version.
@@ -63,12 +65,15 @@ is run by `legcal_bench.evaluation.walk`), `offsets`, `correction`, `sensors` (`
 
 from __future__ import annotations
 
+from os import PathLike
 from typing import Any
 
 import numpy as np
 from gymnasium import spaces
 
-from legcal_bench.envs.base import MujocoEnv
+from legcal_bench import inputs
+from legcal_bench.envs.base import MujocoEnv, named
+from legcal_bench.sim.double_support import PHYSICS_DT_RANGE
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.policies.runner import walking_config
 from legcal_bench.policies.spec import PolicySpec, load_policy_spec
@@ -109,15 +114,40 @@ def _correction(value, where: str, legmap: LegMap) -> np.ndarray:
     n = legmap.n_joints
     if value is None:
         return np.zeros(n)
-    c = np.asarray(value, dtype=float)
+    try:
+        c = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        c = np.full(0, np.nan)
     if c.shape != (n,) or not np.isfinite(c).all():
         raise ConfigError(f"{where}: give {n} finite radians, one per leg joint of {legmap.name} in leg-map order "
                           "(a calibration's offsets), or None")
     return c
 
 
+def _policy(policy) -> PolicySpec | None:
+    if policy is None or isinstance(policy, PolicySpec):
+        return policy
+    if not isinstance(policy, (str, PathLike)):
+        raise ConfigError(f"policy = {policy!r}: give a policy spec YAML's path, one of our policies (a2, a3), a "
+                          "PolicySpec, or None (the servos hold the default pose)")
+    return named("policy", load_policy_spec, policy)
+
+
+def _walking(walking) -> WalkingConfig:
+    """A WalkingConfig whose physics step is in range (its own checks did the rest)."""
+    if not isinstance(walking, WalkingConfig):
+        raise ConfigError(f"walking = {walking!r}: give a legcal_bench.sim.walking.WalkingConfig, or None (the "
+                          "policy spec's, or for a robot without one the collect servo gains)")
+    inputs.number("walking.physics_dt", walking.physics_dt, low=PHYSICS_DT_RANGE[0], high=PHYSICS_DT_RANGE[1],
+                  fix="the MuJoCo time step in seconds, e.g. 0.002")
+    inputs.count("walking.decimation", walking.decimation, fix="physics steps per control step, e.g. 10")
+    return walking
+
+
 class WalkingEnv(MujocoEnv):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 50}
+    action_doc = "joint position targets (rad, encoder space), the leg joints in leg-map order, then a whole-body " \
+                 "policy's other joints"
 
     def __init__(
         self,
@@ -132,23 +162,30 @@ class WalkingEnv(MujocoEnv):
         render_mode: str | None = None,
         width: int = 640,
         height: int = 480,
+        **unknown,
     ):
+        self._refuse_unknown(unknown)
         if robot is None:
             raise LegMapError("robot: give a built-in name or the path of a leg map, e.g. "
                               "gym.make('legcal/Walking-Path-v0', robot='robot.legmap.yaml', policy='policy.yaml')")
+        offset_seed = inputs.seed("offset_seed", offset_seed)
         self.legmap = robot if isinstance(robot, LegMap) else load_robot(robot, mjcf)
-        self.policy_spec = None if policy is None else (
-            policy if isinstance(policy, PolicySpec) else load_policy_spec(policy))
+        self.policy_spec = _policy(policy)
         if walking is None:
             walking = (walking_config(self.policy_spec, self.legmap) if self.policy_spec is not None
                        else default_walking_config(self.legmap))
-        self.sim = WalkingSim(self.legmap, walking, sim_sensors(sensors))
+        walking = _walking(walking)
+        self.offsets = named("offsets", resolve_offsets, offsets, self.legmap, np.random.default_rng(offset_seed))
+        self.correction = _correction(correction, "correction", self.legmap)
+        self.sim = WalkingSim(self.legmap, walking, named("sensors", sim_sensors, sensors))
         super().__init__(walking.physics_dt, walking.decimation, render_mode, width, height)
         self._offset_seed = offset_seed
         self.offsets_spec = offsets
-        self.offsets = resolve_offsets(offsets, self.legmap, np.random.default_rng(offset_seed))
-        self.correction = _correction(correction, "correction", self.legmap)
         m, sc = self.sim.model, self.sim.scene
+        g = m.vis.global_
+        if render_mode is not None and (self.width > g.offwidth or self.height > g.offheight):
+            raise ConfigError(f"width, height = {self.width}, {self.height}: larger than the model's offscreen "
+                              f"buffer ({g.offwidth} x {g.offheight}); give at most that")
         jnt = m.dof_jntid[self.sim.body_dof]  # the leg joints, then a whole-body policy's others
         low = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 0] - 0.5, -np.pi)
         high = np.where(m.jnt_limited[jnt], m.jnt_range[jnt, 1] + 0.5, np.pi)
@@ -170,7 +207,8 @@ class WalkingEnv(MujocoEnv):
         super().reset(seed=seed)
         options = self._reset_options(options, RESET_OPTIONS)
         if "offsets" in options:
-            self.offsets = resolve_offsets(options["offsets"], self.legmap, np.random.default_rng(self._offset_seed))
+            self.offsets = named("reset option offsets", resolve_offsets, options["offsets"], self.legmap,
+                                 np.random.default_rng(self._offset_seed))
         if "correction" in options:
             self.correction = _correction(options["correction"], "reset option correction", self.legmap)
         self.sim.reset(self.offsets, self.correction, self.np_random)
@@ -178,13 +216,14 @@ class WalkingEnv(MujocoEnv):
         return self._observe(), self._info()
 
     def step(self, action):
+        """ConfigError for an action of the wrong length, not numbers or not finite."""
         obs = self.advance(action)
         return obs, 0.0, self.sim.fallen_at is not None, False, self._info()
 
     def advance(self, action) -> dict:
         """`step` without its info dict (the truth, from `sim`, when asked): the
         observation. For a caller that reads the truth itself (`evaluation.walk`)."""
-        self.sim.step(np.asarray(action, dtype=np.float64).reshape(self.sim.config.body_joints))
+        self.sim.step(self._action(action))
         return self._observe()
 
     def _observe(self) -> dict:

@@ -15,6 +15,8 @@ restores every buffer to its value in the file, so each episode starts as the fi
 
 from __future__ import annotations
 
+import logging
+from contextlib import contextmanager
 from typing import Callable
 
 import numpy as np
@@ -146,6 +148,20 @@ def _onnx(session, n_obs: int, where: str) -> Model:
     return Model(run, reset)
 
 
+@contextmanager
+def _quiet(logger: str):
+    """Silence a library's logger below ERROR for the block: torch.export logs a whole
+    traceback as a warning before raising on a file it cannot read, which the one-line
+    ConfigError then says better."""
+    log = logging.getLogger(logger)
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        log.setLevel(level)
+
+
 def load_model(path, fmt: str, n_obs: int, n_act: int, where: str = "policy") -> Model:
     if fmt in ("torchscript", "torch.export"):
         import torch
@@ -154,8 +170,8 @@ def load_model(path, fmt: str, n_obs: int, n_act: int, where: str = "policy") ->
 
         torch.set_num_threads(1)
         try:
-            with warnings.catch_warnings():  # torch 2.13 marks TorchScript deprecated; published policies use it
-                warnings.simplefilter("ignore", DeprecationWarning)
+            with warnings.catch_warnings(), _quiet("torch.export"):
+                warnings.simplefilter("ignore", DeprecationWarning)  # torch 2.13: TorchScript deprecated
                 module = torch.jit.load(str(path), map_location="cpu") if fmt == "torchscript" else \
                 torch.export.load(str(path)).module()
         except Exception as e:  # a file of another format fails here

@@ -28,16 +28,20 @@ each reads are in `legcal_bench.policies.observation`.
 
 from __future__ import annotations
 
+import difflib
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from legcal_bench.errors import ConfigError
+from legcal_bench.inputs import read_text, shown
 
 SPEC_FORMAT = "legcal-policy/1"
 WALKERS_DIR = Path(__file__).resolve().parent / "walkers"  # our own policies: walkers/<robot>/policy.yaml
 MODEL_FORMATS = ("torchscript", "torch.export", "onnx")
+MAX_PHYSICS_HZ = 1e6  # a physics step of 1 us: any faster is a typo, not a setting
 
 
 @dataclass(frozen=True)
@@ -136,18 +140,33 @@ class PolicySpec:
         return [t.term for t in self.observation if TERMS[t.term].privileged]
 
 
-def _numbers(v, n: int | None, where: str, positive: bool = False) -> tuple[float, ...]:
-    try:
-        if isinstance(v, (bool, str)) or (isinstance(v, list) and any(isinstance(x, (bool, str)) for x in v)):
-            raise ValueError
-        a = np.atleast_1d(np.asarray(v, dtype=float))
-    except (TypeError, ValueError):
-        a = None
-    if a is None or a.ndim != 1 or not np.isfinite(a).all() or (n is not None and len(a) != n) or (
-            positive and (a < 0).any()):
-        want = f"{n} finite numbers" if n is not None else "finite numbers"
-        raise ConfigError(f"{where}: must be {want}{' >= 0' if positive else ''}, got {v!r}")
+def _numbers(v, n: int | None, where: str, positive: bool = False, strict: bool = False) -> tuple[float, ...]:
+    """`n` finite numbers (any count >= 1 with None), a list or one number; >= 0 with
+    `positive`, > 0 with `strict`."""
+    items = list(v) if isinstance(v, (list, tuple)) else [v]
+    a = None
+    if items and all(isinstance(x, numbers.Real) and not isinstance(x, bool) for x in items):
+        try:
+            a = np.array([float(x) for x in items])
+        except OverflowError:
+            a = None
+    if a is None or not np.isfinite(a).all() or (n is not None and len(a) != n) or (
+            positive and (a < 0).any()) or (strict and (a <= 0).any()):
+        want = "one finite number" if n == 1 else f"{n} finite numbers" if n is not None else "finite numbers"
+        raise ConfigError(f"{where}: must be {want}{' > 0' if strict else ' >= 0' if positive else ''}, got {shown(v)}")
     return tuple(float(x) for x in a)
+
+
+def _unknown(where: str, d: dict, known, what: str = "fields") -> None:
+    """Refuse keys of `d` not in `known`, each named with the closest known one (a
+    misspelt key would otherwise be ignored)."""
+    bad = [k for k in d if k not in known]
+    if bad:
+        hints = []
+        for k in bad:
+            close = difflib.get_close_matches(str(k), [str(x) for x in known], n=1)
+            hints.append(repr(k) + (f" (did you mean {close[0]!r}?)" if close else ""))
+        raise ConfigError(f"{where}: unknown {what} [{', '.join(hints)}]; known: {sorted(map(str, known))}")
 
 
 def _holds(v, joints: list, actuators: str, w: str) -> tuple[Hold, ...]:
@@ -156,21 +175,22 @@ def _holds(v, joints: list, actuators: str, w: str) -> tuple[Hold, ...]:
         return ()
     if not isinstance(v, dict):
         raise ConfigError(f"{w}: field 'hold' must map joints the policy does not drive to the angle (rad) their "
-                          "servos hold, e.g. {waist_yaw_joint: 0.0}")
+                          f"servos hold, e.g. {{waist_yaw_joint: 0.0}}, got {shown(v)}")
     out = []
     for name, e in v.items():
         where = f"{w}: hold.{name}"
+        if not isinstance(name, str) or not name:
+            raise ConfigError(f"{where}: a held joint is named by its name in the robot's MJCF (a string)")
         if name in joints:
             raise ConfigError(f"{where}: the policy drives this joint ('joints'); hold only the others")
         e = e if isinstance(e, dict) else {"q": e}
-        if set(e) - {"q", "kp", "kd"}:
-            raise ConfigError(f"{where}: keys q (rad), kp, kd only")
+        _unknown(where, e, ("q", "kp", "kd"), "keys (q in rad, kp, kd)")
         q = _numbers(e.get("q"), 1, f"{where}.q (rad)")[0]
         kp = kd = None
         if actuators == "pd":
-            kp = _numbers(e.get("kp"), 1, f"{where}.kp (N m/rad; PD servos need gains)", True)[0]
+            kp = _numbers(e.get("kp"), 1, f"{where}.kp (N m/rad; PD servos need gains)", strict=True)[0]
             kd = _numbers(e.get("kd"), 1, f"{where}.kd (N m s/rad)", True)[0]
-        out.append(Hold(str(name), q, kp, kd))
+        out.append(Hold(name, q, kp, kd))
     return tuple(out)
 
 
@@ -195,68 +215,87 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     from legcal_bench.policies.observation import TERMS
 
     path = resolve_policy(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError(f"policy spec {path}: no such file; give a spec YAML or one of our policies "
                           f"({', '.join(builtin_policies())})")
+    text = read_text("policy spec", path, "policy spec")  # a folder, unreadable or not UTF-8: named
     try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError) as e:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as e:
         raise ConfigError(f"policy spec {path}: not a readable YAML file ({e})") from None
+    except RecursionError:
+        raise ConfigError(f"policy spec {path}: not a readable YAML file (nested too deeply)") from None
     w = f"policy spec {path}"
     if not isinstance(doc, dict) or doc.get("format") != SPEC_FORMAT:
-        raise ConfigError(f"{w}: field 'format' must be {SPEC_FORMAT!r} (see legcal_bench/policies/spec.py)")
-    known = {"format", "name", "model", "joints", "default_q", "action", "pd", "rates", "command", "observation",
-             "notes", "hold", "actuators", "sim", "command_schedule"}
-    unknown = set(doc) - known
-    if unknown:
-        raise ConfigError(f"{w}: unknown fields {sorted(unknown)}; known: {sorted(known)}")
+        got = shown(doc.get("format")) if isinstance(doc, dict) else f"{shown(doc)} (the file is not a YAML mapping)"
+        raise ConfigError(f"{w}: field 'format' must be {SPEC_FORMAT!r}, got {got} (see docs/policy-spec.md)")
+    _unknown(w, doc, ("format", "name", "model", "joints", "default_q", "action", "pd", "rates", "command",
+                      "observation", "notes", "hold", "actuators", "sim", "command_schedule"))
+    name = doc.get("name", path.stem)
+    if not isinstance(name, str) or not name.strip():
+        raise ConfigError(f"{w}: field 'name' is {shown(name)}: give the policy's name (a string), or leave the "
+                          "field out for the file's name")
+    notes = doc.get("notes") or {}
+    if not isinstance(notes, dict):
+        raise ConfigError(f"{w}: field 'notes' is {shown(notes)}: notes are a mapping of your own keys to values "
+                          "(e.g. {made_by: ..., source: ...})")
     model = doc.get("model")
-    if not isinstance(model, dict) or not isinstance(model.get("file"), str):
-        raise ConfigError(f"{w}: field 'model' must be {{file: <path>, format: {' | '.join(MODEL_FORMATS)}}}")
+    mfile = model.get("file") if isinstance(model, dict) else None
+    if not isinstance(model, dict) or not isinstance(mfile, str) or not mfile.strip() or "\0" in mfile:
+        raise ConfigError(f"{w}: field 'model' must be {{file: <path>, format: {' | '.join(MODEL_FORMATS)}}}, got "
+                          f"{shown(model)}")
+    _unknown(f"{w}: model", model, ("file", "format"), "keys")
     fmt = model.get("format")
-    if fmt not in MODEL_FORMATS:
+    if not isinstance(fmt, str) or fmt not in MODEL_FORMATS:
         raise ConfigError(f"{w}: model.format {fmt!r}: use one of {MODEL_FORMATS}")
-    model_file = (path.parent / model["file"]).resolve()
+    model_file = (path.parent / Path(mfile).expanduser()).resolve()
+    if model_file.is_dir():
+        raise ConfigError(f"{w}: model.file {mfile!r} is a folder ({model_file}); give the network's file itself")
     if not model_file.is_file():
-        raise ConfigError(f"{w}: model.file {model['file']!r}: no such file ({model_file}); paths are relative to "
+        raise ConfigError(f"{w}: model.file {mfile!r}: no such file ({model_file}); paths are relative to "
                           "the spec")
     joints = doc.get("joints")
-    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) for j in joints) or len(
+    if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints) or len(
             set(joints)) != len(joints):
-        raise ConfigError(f"{w}: field 'joints' must list the policy's joint names, each once, in its order")
+        raise ConfigError(f"{w}: field 'joints' must list the policy's joint names, each once, in its order, got "
+                          f"{shown(joints)}")
     n = len(joints)
     default_q = _numbers(doc.get("default_q"), n, f"{w}: default_q (rad, one per joint)")
     action = doc.get("action", {})
     if not isinstance(action, dict):
-        raise ConfigError(f"{w}: field 'action' must be {{scale: <number>, clip: <number or null>}}")
-    unknown_action = set(action) - {"scale", "clip"}
-    if unknown_action:
-        raise ConfigError(f"{w}: action: unknown keys {sorted(unknown_action)}; known: clip, scale")
+        raise ConfigError(f"{w}: field 'action' must be {{scale: <number>, clip: <number or null>}}, got "
+                          f"{shown(action)}")
+    _unknown(f"{w}: action", action, ("clip", "scale"), "keys")
     scale = _numbers(action.get("scale", 1.0), 1, f"{w}: action.scale")[0]
     clip, clip_joints, clip_range = None, None, False
     if action.get("clip") == "joint_range":
         clip_range = True
     elif isinstance(action.get("clip"), list):
-        clip_joints = _numbers(action["clip"], n, f"{w}: action.clip (one bound per joint)", True)
+        clip_joints = _numbers(action["clip"], n, f"{w}: action.clip (one bound per joint)", strict=True)
     elif action.get("clip") is not None:
-        clip = _numbers(action["clip"], 1, f"{w}: action.clip (a number, one per joint, or joint_range)", True)[0]
+        clip = _numbers(action["clip"], 1, f"{w}: action.clip (a number, one per joint, or joint_range)",
+                        strict=True)[0]
     actuators = doc.get("actuators", "pd")
-    if actuators not in ("pd", "model"):
-        raise ConfigError(f"{w}: field 'actuators' is {actuators!r}: use pd (PD servos with pd.kp, pd.kd) or model "
-                          "(the robot's MJCF actuators, their gains and ranges)")
+    if not isinstance(actuators, str) or actuators not in ("pd", "model"):
+        raise ConfigError(f"{w}: field 'actuators' is {shown(actuators)}: use pd (PD servos with pd.kp, pd.kd) or "
+                          "model (the robot's MJCF actuators, their gains and ranges)")
     pd = doc.get("pd")
     if actuators == "model" and pd is None:
         pd = {"kp": [0.0] * n, "kd": [0.0] * n}  # unused: the model's actuators
     if not isinstance(pd, dict):
-        raise ConfigError(f"{w}: field 'pd' must be {{kp: [...], kd: [...]}} (N m/rad, N m s/rad, one per joint)")
-    kp = _numbers(pd.get("kp"), n, f"{w}: pd.kp (N m/rad, one per joint)", True)
+        raise ConfigError(f"{w}: field 'pd' must be {{kp: [...], kd: [...]}} (N m/rad, N m s/rad, one per joint), "
+                          f"got {shown(pd)}")
+    _unknown(f"{w}: pd", pd, ("kp", "kd", "torque_limit"), "keys")
+    # PD servos need stiffness on every joint; with the model's actuators the gains are unused.
+    kp = _numbers(pd.get("kp"), n, f"{w}: pd.kp (N m/rad, one per joint)", True, strict=actuators == "pd")
     kd = _numbers(pd.get("kd"), n, f"{w}: pd.kd (N m s/rad, one per joint)", True)
-    tl = None if pd.get("torque_limit") is None else _numbers(pd["torque_limit"], n, f"{w}: pd.torque_limit", True)
+    tl = None if pd.get("torque_limit") is None else _numbers(pd["torque_limit"], n, f"{w}: pd.torque_limit (N m)",
+                                                              strict=True)
     hold = _holds(doc.get("hold"), joints, actuators, w)
     sim = doc.get("sim") or {}
     if not isinstance(sim, dict) or set(sim) - {"floor_friction", "keyframe"}:
         raise ConfigError(f"{w}: field 'sim' must be {{floor_friction: <number or [sliding, torsional, rolling]>, "
-                          f"keyframe: <name or index>}}, got {sim!r}")
+                          f"keyframe: <name or index>}}, got {shown(sim)}")
     friction = None
     if sim.get("floor_friction") is not None:
         f = _numbers(sim["floor_friction"], None, f"{w}: sim.floor_friction", True)
@@ -264,22 +303,33 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
             raise ConfigError(f"{w}: sim.floor_friction: one number (sliding) or three (sliding, torsional, rolling)")
         friction = (f[0], 0.005, 0.0001) if len(f) == 1 else f
     keyframe = sim.get("keyframe")
-    if keyframe is not None and (isinstance(keyframe, bool) or not isinstance(keyframe, (str, int))):
-        raise ConfigError(f"{w}: sim.keyframe must be a keyframe's name or index in the robot's MJCF")
+    if keyframe is not None and (isinstance(keyframe, bool) or not isinstance(keyframe, (str, int))
+                                 or (isinstance(keyframe, int) and keyframe < 0)):
+        raise ConfigError(f"{w}: sim.keyframe is {shown(keyframe)}: give a keyframe's name or index (>= 0) in the "
+                          "robot's MJCF")
     rates = doc.get("rates", {})
     if not isinstance(rates, dict):
-        raise ConfigError(f"{w}: field 'rates' must be {{physics_hz: ..., control_hz: ...}}")
-    physics_hz = _numbers(rates.get("physics_hz", 500), 1, f"{w}: rates.physics_hz", True)[0]
-    control_hz = _numbers(rates.get("control_hz", 50), 1, f"{w}: rates.control_hz", True)[0]
-    if control_hz <= 0 or physics_hz < control_hz or abs(physics_hz / control_hz - round(physics_hz / control_hz)) > 1e-6:
+        raise ConfigError(f"{w}: field 'rates' must be {{physics_hz: ..., control_hz: ...}}, got {shown(rates)}")
+    _unknown(f"{w}: rates", rates, ("physics_hz", "control_hz"), "keys")
+    physics_hz = _numbers(rates.get("physics_hz", 500), 1, f"{w}: rates.physics_hz", strict=True)[0]
+    control_hz = _numbers(rates.get("control_hz", 50), 1, f"{w}: rates.control_hz", strict=True)[0]
+    if physics_hz > MAX_PHYSICS_HZ:
+        raise ConfigError(f"{w}: rates.physics_hz = {physics_hz:g}: at most {MAX_PHYSICS_HZ:g} (a physics step of "
+                          "1 us); give the rate the policy was trained with")
+    ratio = physics_hz / control_hz
+    if physics_hz < control_hz or abs(ratio - round(ratio)) > 1e-6:
         raise ConfigError(f"{w}: rates: physics_hz ({physics_hz:g}) must be a whole multiple of control_hz "
                           f"({control_hz:g})")
     command = _numbers(doc.get("command", [0.0, 0.0, 0.0]), 3, f"{w}: command [vx m/s, vy m/s, yaw rate rad/s]")
     schedule = []
-    for i, e in enumerate(doc.get("command_schedule") or []):
+    entries = doc.get("command_schedule") or []
+    if not isinstance(entries, list):
+        raise ConfigError(f"{w}: field 'command_schedule' is {shown(entries)}: list {{t: <s since reset>, "
+                          "command: [vx, vy, yaw rate]} entries, times increasing")
+    for i, e in enumerate(entries):
         where = f"{w}: command_schedule[{i}]"
         if not isinstance(e, dict) or set(e) != {"t", "command"}:
-            raise ConfigError(f"{where}: give {{t: <s since reset>, command: [vx, vy, yaw rate]}}")
+            raise ConfigError(f"{where}: give {{t: <s since reset>, command: [vx, vy, yaw rate]}}, got {shown(e)}")
         t_i = _numbers(e["t"], 1, f"{where}.t (s)", True)[0]
         if schedule and t_i <= schedule[-1][0]:
             raise ConfigError(f"{where}.t: times must increase ({t_i:g} after {schedule[-1][0]:g})")
@@ -287,56 +337,58 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     obs = doc.get("observation")
     if not isinstance(obs, list) or not obs:
         raise ConfigError(f"{w}: field 'observation' must list the observation terms in order (terms: "
-                          f"{', '.join(TERMS)})")
+                          f"{', '.join(TERMS)}), got {shown(obs)}")
     terms = []
     for i, t in enumerate(obs):
         wt = f"{w}: observation[{i}]"
-        if not isinstance(t, dict) or t.get("term") not in TERMS:
-            raise ConfigError(f"{wt}: 'term' must be one of {list(TERMS)}, got {t!r}")
-        extra = set(t) - {"term", "scale", "clip", "mask", "period", "offsets", "frequency", "initial", "layout",
-                          "stop_at_zero_command", "name", "size", "history"}
-        if extra:
-            raise ConfigError(f"{wt}: unknown keys {sorted(extra)}")
+        if not isinstance(t, dict) or not isinstance(t.get("term"), str) or t["term"] not in TERMS:
+            raise ConfigError(f"{wt}: 'term' must be one of {list(TERMS)}, got {shown(t)}")
+        _unknown(wt, t, ("term", "scale", "clip", "mask", "period", "offsets", "frequency", "initial", "layout",
+                         "stop_at_zero_command", "name", "size", "history"), "keys")
         gait = {}
         if t["term"] == "gait_phase":
-            gait["frequency"] = _numbers(t.get("frequency"), 1, f"{wt}: frequency (Hz)", True)[0]
+            gait["frequency"] = _numbers(t.get("frequency"), 1, f"{wt}: frequency (Hz)", strict=True)[0]
             gait["initial"] = _numbers(t.get("initial", [0.0, np.pi]), None, f"{wt}: initial (rad, one per foot)")
             gait["layout"] = t.get("layout", "grouped")
-            if gait["layout"] not in ("grouped", "interleaved"):
+            if not isinstance(gait["layout"], str) or gait["layout"] not in ("grouped", "interleaved"):
                 raise ConfigError(f"{wt}: layout {gait['layout']!r}: grouped ([cos f1, cos f2, ..., sin f1, ...]) or "
                                   "interleaved ([cos f1, sin f1, cos f2, sin f2, ...])")
-            gait["stop_at_zero_command"] = bool(t.get("stop_at_zero_command", False))
+            stop = t.get("stop_at_zero_command", False)
+            if not isinstance(stop, bool):
+                raise ConfigError(f"{wt}: stop_at_zero_command is {shown(stop)}: true or false")
+            gait["stop_at_zero_command"] = stop
         if t["term"] == "sensor":
-            if not isinstance(t.get("name"), str) or not isinstance(t.get("size"), int) or t["size"] < 1:
+            size = t.get("size")
+            if not isinstance(t.get("name"), str) or not t["name"] or isinstance(size, bool) or not isinstance(
+                    size, int) or size < 1:
                 raise ConfigError(f"{wt}: term sensor needs 'name' (an MJCF sensor of the robot) and 'size' (its "
-                                  "values, e.g. 3)")
-            gait.update(name=t["name"], size=t["size"])
+                                  f"values, e.g. 3), got name {shown(t.get('name'))}, size {shown(size)}")
+            gait.update(name=t["name"], size=size)
         history = t.get("history", 1)
         if isinstance(history, bool) or not isinstance(history, int) or history < 1:
             raise ConfigError(f"{wt}: history must be a whole number of control steps >= 1 (the last k frames of "
-                              f"the term, oldest first), got {history!r}")
+                              f"the term, oldest first), got {shown(history)}")
         gait["history"] = history
         mask = t.get("mask")
         if mask is not None:
             if not TERMS[t["term"]].per_joint:
-                raise ConfigError(f"{wt}: 'mask' applies to joint terms only ({[k for k, v in TERMS.items() if v.per_joint]})")
-            if not isinstance(mask, list) or not all(m in joints for m in mask):
-                raise ConfigError(f"{wt}: 'mask' must list joint names from 'joints'")
+                raise ConfigError(f"{wt}: 'mask' applies to joint terms only "
+                                  f"({[k for k, v in TERMS.items() if v.per_joint]})")
+            if not isinstance(mask, list) or not all(isinstance(m, str) and m in joints for m in mask):
+                raise ConfigError(f"{wt}: 'mask' must list joint names from 'joints', got {shown(mask)}")
         period = t.get("period")
         if TERMS[t["term"]].needs_period:
             if period is None:
                 raise ConfigError(f"{wt}: term {t['term']!r} needs 'period' (s)")
-            period = _numbers(period, 1, f"{wt}: period (s)", True)[0]
-            if period <= 0:
-                raise ConfigError(f"{wt}: period must be > 0 s")
+            period = _numbers(period, 1, f"{wt}: period (s)", strict=True)[0]
         offsets = None
         if t["term"] == "foot_phase":
             offsets = _numbers(t.get("offsets", [0.0, 0.5]), None, f"{wt}: offsets (fractions of a period)")
         terms.append(ObsTerm(t["term"], _numbers(t.get("scale", 1.0), None, f"{wt}: scale"),
-                             None if t.get("clip") is None else _numbers(t["clip"], 1, f"{wt}: clip", True)[0],
+                             None if t.get("clip") is None else _numbers(t["clip"], 1, f"{wt}: clip", strict=True)[0],
                              tuple(mask) if mask is not None else None, period, offsets, **gait))
-    spec = PolicySpec(str(doc.get("name", path.stem)), path, model_file, fmt, tuple(joints), default_q, scale, clip,
-                      kp, kd, tl, physics_hz, control_hz, command, tuple(terms), doc.get("notes") or {},
+    spec = PolicySpec(name, path, model_file, fmt, tuple(joints), default_q, scale, clip,
+                      kp, kd, tl, physics_hz, control_hz, command, tuple(terms), notes,
                       hold=hold, actuators=actuators, action_clip_joints=clip_joints, action_clip_range=clip_range,
                       floor_friction=friction, keyframe=keyframe, command_schedule=tuple(schedule))
     from legcal_bench.policies.observation import observation_size

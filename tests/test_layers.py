@@ -11,7 +11,8 @@ ROOTS = {"legcal_bench": "legcal_bench", "envs": "legcal_bench.envs", "calibrato
          "policies": "legcal_bench.policies", "examples": "legcal_bench.examples"}
 # Lowest first; a module may import from its own layer or any before it.
 LAYERS = [
-    ("core", ("legcal_bench", "legcal_bench.errors", "legcal_bench.paper", "legcal_bench.provenance",
+    ("core", ("legcal_bench", "legcal_bench.errors", "legcal_bench.inputs", "legcal_bench.paper",
+              "legcal_bench.provenance",
               "legcal_bench.files", "legcal_bench.examples")),
     ("geometry", ("legcal_bench.geometry",)),
     ("robots", ("legcal_bench.robots",)),

@@ -124,18 +124,12 @@ def walk_eval(robot: str = "a3", policy: str = "a3", offsets: str = "paper@3", t
     """The closed-loop evaluation (`legcal-bench walk-eval`): per trial a static session
     set, the calibrator's estimate, then nominal, uncorrected, corrected and oracle walks.
     Returns (summary, trials), what the report's JSON holds."""
-    from legcal_bench.benchmark.runner import make_executor
+    from legcal_bench.benchmark.runner import executing
     from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, calibrator_options, evaluate
 
     options = {**calibrator_options(calibrator), **options}
     get_calibrator(calibrator, **options)
     cfg = ClosedLoopConfig(robot=robot, policy=policy, offsets=offsets, trials=trials, seconds=seconds,
                            calibrator=calibrator, options=options)
-    executor, client = make_executor(None, workers) if workers > 1 else (None, None)
-    try:
+    with executing(None, workers) as executor:
         return evaluate(cfg, executor, progress=progress)
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        if client is not None:
-            client.close()

@@ -47,7 +47,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tempfile
 import time
 from pathlib import Path
 
@@ -55,6 +54,7 @@ import numpy as np
 
 from legcal_bench.errors import ConfigError
 from legcal_bench.evaluation.modelgap import ALPHA
+from legcal_bench.files.scratch import scratch_dir
 
 RESULTS_NAME = "modelgap"  # its folder and files under the leaderboard root
 CASES = ("clean", "library", "near", "multi", "outside")  # `bench --cases`: clean takes
@@ -214,7 +214,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
         specs = (spec,)
     cal_name, cal_options = calibrator
     cal = get_calibrator(cal_name, **dict(cal_options))
-    with tempfile.TemporaryDirectory(prefix="legcal_modelgap_") as work:
+    with scratch_dir("modelgap") as work:
         mode = "kinematic" if kind == "clean_kinematic" else "weld"
         legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode, stances, collect)
         row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name,
@@ -364,7 +364,7 @@ def run_job(job: tuple, cases_dir: str, provenance: dict, collect: dict | None =
     its file (`case_path`) atomically, with its key and provenance (`provenance`: the
     key, the code version and the command, read once when the run started); returns
     the file's path. A worker process's task."""
-    from legcal_bench.benchmark.tasks import single_thread
+    from legcal_bench.files.parallel import single_thread
     from legcal_bench.files.atomic import atomic_write_json
 
     single_thread()
@@ -452,27 +452,15 @@ def _execute(tasks: list[tuple], workers: int, progress: bool) -> None:
             return
         from concurrent.futures import FIRST_EXCEPTION, wait
 
-        from legcal_bench.benchmark.runner import make_executor
+        from legcal_bench.files.parallel import local_executor, stopping
 
-        ex, _ = make_executor(None, min(workers, len(tasks)))
-        futures = []
-        try:
-            futures = [ex.submit(run_job, *t) for t in tasks]
-            left = set(futures)
+        with stopping(local_executor(min(workers, len(tasks)))) as ex:
+            left = {ex.submit(run_job, *t) for t in tasks}
             while left:
                 done, left = wait(left, return_when=FIRST_EXCEPTION)
                 for f in done:
                     f.result()  # raises the case's error here
                     bar.update(1)
-        except BaseException as e:
-            for f in futures:
-                f.cancel()
-            if not isinstance(e, Exception):  # Ctrl-C: end our workers, and the cases in progress
-                for proc in list((getattr(ex, "_processes", None) or {}).values()):
-                    proc.terminate()
-            ex.shutdown(wait=True, cancel_futures=True)
-            raise
-        ex.shutdown(wait=True)
     finally:
         bar.close()
 

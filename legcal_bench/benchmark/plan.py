@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench import inputs
 from legcal_bench.benchmark.suites import SUITES, Suite, get_suite
 from legcal_bench.calibrators.registry import available_calibrators, get_calibrator
 from legcal_bench.errors import ConfigError, CalibrationError
@@ -30,6 +31,7 @@ from legcal_bench.protocol.collect import CollectConfig
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots import available, load_robot, resolve_robot, robot_label
 from legcal_bench.sim.offsets import paper_injection, resolve_offsets
+from legcal_bench.sim.scene import MODES
 
 NATIVE = "random:1.2"  # factory residual: offsets drawn uniformly in +-1.2 deg (was +-0.3 before issue #11)
 NATIVE_SEED_BASE = 10_000  # the native offsets of seed s come from default_rng(NATIVE_SEED_BASE + s)
@@ -157,6 +159,12 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
         s = Suite(suite, (), (), 1)  # an ad-hoc plan, e.g. a sweep
     else:
         s = get_suite(suite)  # raises: names the known suites
+    if seeds is not None:
+        inputs.count("seeds", seeds, fix="seeds per robot and mode")
+    for mode in modes or ():
+        inputs.choice("modes", mode, MODES)
+    for scale in scales:
+        inputs.positive("scales", scale, fix="multiples of the paper's injection")
     overrides = {k: v for k, v in (collect_overrides or {}).items() if v is not None}
     if overrides.get("mjcf") is not None:
         overrides["mjcf"] = str(Path(overrides["mjcf"]).resolve())
@@ -164,11 +172,14 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
         overrides["stances"] = tuple(overrides["stances"])
     col = tuple(sorted({**s.collect, **overrides}.items()))
     variants = calibrator_variants(calibrators)
-    cells = []
+    if not variants:
+        raise ConfigError("no calibrator to run: none is registered (entry-point group legcal_bench.calibrators)")
+    cells, skipped = [], []
     for robot in robots or s.robots:
         missing = available(robot)
         if missing is not None:
             warnings.warn(f"skipping robot {robot}: {missing}", MissingRobotWarning, stacklevel=2)
+            skipped.append(f"{robot}: {missing}")
             continue
         for mode in modes or s.modes:
             for seed in range(seeds if seeds is not None else s.seeds):
@@ -176,4 +187,8 @@ def plan(suite: str, robots=None, modes=None, seeds=None, scales=(1.0,), calibra
                     for name, variant, options in variants:
                         cells.append(Cell(suite, robot, mode, seed, float(scale), name, variant,
                                           tuple(sorted(options.items())), col))
+    if not cells:
+        raise ConfigError(f"suite {suite!r}: no cells to run: " + ("every robot was skipped (" + "; ".join(skipped)
+                          + ")" if skipped else "no robots, modes, seeds or scales") + "; give robots whose models "
+                          "are on this machine (--robots)")
     return cells

@@ -5,7 +5,6 @@ workers run them alike; both are idempotent and write atomically."""
 from __future__ import annotations
 
 import json
-import os
 from dataclasses import asdict
 from pathlib import Path
 
@@ -19,19 +18,12 @@ from legcal_bench.errors import LegcalError
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.files.parallel import single_thread
 from legcal_bench.protocol.collect import collect, is_collected
 from legcal_bench.provenance import code_version
 from legcal_bench.sim.offsets import paper_injection
 
 HIST_EDGES_MM = np.linspace(-4.0, 4.0, 81)  # held-out foot-height bins; outliers land in the end bins
-THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-def single_thread() -> None:
-    """Small problems on these machines run faster on one BLAS thread per process (for
-    libraries that read these later; the runner sets them before workers start)."""
-    for k in THREAD_VARIABLES:
-        os.environ.setdefault(k, "1")
 
 
 def is_current(out: Path, ds: Dataset) -> bool:

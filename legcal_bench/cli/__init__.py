@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -33,13 +34,56 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+INTERRUPTED = 130  # the shell's exit status for a command ended by Ctrl-C (128 + SIGINT)
+RESUME = "nothing half-written is left (results are written whole or not at all); rerun the command to start again"
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Bad input (a `LegcalError`): one line, exit 2. Ctrl-C or a
+    SIGTERM: one line saying what is kept and how to resume (the command's `resume`
+    default, `RESUME` otherwise), exit 130; its workers and scratch folders go with it.
+    Scratch folders of commands killed outright are removed first (`scratch.sweep`)."""
+    from legcal_bench.files.scratch import sweep
+
     args = build_parser().parse_args(argv)
+    sweep()
+    previous = signal.signal(signal.SIGTERM, _terminate) if _main_thread() else None
     try:
         return args.func(args)
     except LegcalError as e:
+        _close_bars()
         print(f"legcal-bench {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        sweep()  # the scratch folders of the workers just stopped
+        _close_bars()
+        print(f"legcal-bench {args.command}: interrupted; {getattr(args, 'resume', None) or RESUME}",
+              file=sys.stderr)
+        return INTERRUPTED
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _close_bars() -> None:
+    """End the progress bars an error or Ctrl-C left open, so that the message starts a
+    line of its own (an open bar would redraw after it)."""
+    if "tqdm" in sys.modules:
+        from tqdm import tqdm
+
+        for bar in list(getattr(tqdm, "_instances", ())):
+            bar.close()
+
+
+def _terminate(signum, frame):
+    """SIGTERM (a `kill`, a scheduler's time limit) stops like Ctrl-C."""
+    raise KeyboardInterrupt
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
 
 
 if __name__ == "__main__":

@@ -4,14 +4,52 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
+from legcal_bench import inputs
+from legcal_bench.cli.robots import door
+
+
+# What Ctrl-C keeps (`legcal_bench.cli.main` prints it): each finished cell, session set
+# and model-gap case is a whole file, and a rerun computes only the others.
+RESUME_CELLS = ("the finished cells and session sets are kept under --out and --data; rerun the same command to "
+                "resume (only the unfinished ones are computed)")
+
+def _mode(field: str, value: str) -> str:
+    from legcal_bench.sim.scene import MODES
+
+    return inputs.choice(field, value, MODES)
+
+
+def _door(a: argparse.Namespace, **more) -> None:
+    """bench's and sweep's options checked before any planning: counts, modes, output
+    folders, then the scheduler (reachable, and a Dask scheduler: a few seconds at most)."""
+    door(a, seeds=inputs.count, workers=inputs.count, out=inputs.output_folder,
+         **{("modes" if hasattr(a, "modes") else "mode"): _mode}, **more)
+    if a.scheduler:
+        from legcal_bench.benchmark.runner import check_scheduler
+
+        check_scheduler(a.scheduler)
+
+
+def _exit_code(failed: list[dict], total: int) -> int:
+    """A run's exit code: 1 if a cell failed (how many and why on stderr), else 0."""
+    from legcal_bench.benchmark.runner import failure_summary
+
+    summary = failure_summary(failed, total)
+    if summary:
+        print(summary, file=sys.stderr)
+        return 1
+    return 0
+
 
 def cmd_bench(a: argparse.Namespace) -> int:
+    _door(a, effect_seeds=inputs.count, data=inputs.output_folder)
     from legcal_bench.benchmark import plan as planning
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.runner import run
+    from legcal_bench.benchmark.runner import failures, run
     from legcal_bench.benchmark.suites import get_suite
     from legcal_bench.errors import ConfigError
 
@@ -30,30 +68,26 @@ def cmd_bench(a: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     counts = run(cells, a.data, out / "results", workers=a.workers, scheduler=a.scheduler, progress=not a.quiet)
     wall = time.perf_counter() - t0
+    failed = failures(cells, out / "results")
     text = generate(out)
     tables = text[text.index("## "):text.index("## Matched comparison")] if "## " in text else text
     print("\n".join(line for line in tables.splitlines() if not line.startswith("![")).strip() + "\n")
-    print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {wall:.0f} s wall; "
-          f"leaderboard: {out / 'README.md'}")
-    return 0
+    print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {len(failed)} failed, "
+          f"{wall:.0f} s wall; leaderboard: {out / 'README.md'}")
+    return _exit_code(failed, len(cells))
 
 
 def _bench_closed_loop(a: argparse.Namespace, suite) -> int:
     """The closed-loop suite: walk-eval with every calibrator variant, then the leaderboard."""
     from legcal_bench.benchmark.closed_loop import run_closed_loop_suite
     from legcal_bench.benchmark.leaderboard import generate
-    from legcal_bench.benchmark.runner import make_executor
+    from legcal_bench.benchmark.runner import executing
 
     out = Path(a.out)
     t0 = time.perf_counter()
-    executor, client = make_executor(a.scheduler, a.workers)
-    try:
+    with executing(a.scheduler, a.workers, local=True) as executor:
         files = run_closed_loop_suite(out, trials=a.seeds or suite.seeds, executor=executor, robots=a.robots or suite.robots,
                                       progress=not a.quiet)
-    finally:
-        executor.shutdown()
-        if client is not None:
-            client.close()
     text = generate(out)
     if "## Closed loop" in text:
         section = text[text.index("## Closed loop"):]
@@ -64,43 +98,45 @@ def _bench_closed_loop(a: argparse.Namespace, suite) -> int:
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
+    _door(a, scales=inputs.positive)
     import numpy as np
 
     from legcal_bench.benchmark import plan as planning
-    from legcal_bench.benchmark.runner import run
+    from legcal_bench.benchmark.runner import failures, run
     from legcal_bench.robots import robot_label
 
     cells = planning.plan("sweep", robots=a.robots, modes=[a.mode], seeds=a.seeds, scales=a.scales,
                           calibrators=a.calibrators,
-                          collect_overrides=dict(stance_s=a.stance_seconds, heldout=a.heldout,
-                                                 **_collect_overrides(a)))
+                          collect_overrides=_collect_overrides(a, stance_s=a.stance_seconds, heldout=a.heldout))
     out = Path(a.out)
     counts = run(cells, out / "data", out / "results", workers=a.workers, scheduler=a.scheduler,
                  progress=not a.quiet)
     rows: dict = {}
-    failed = 0
+    failed = failures(cells, out / "results")
     for c in cells:
         r = json.loads(c.path(out / "results").read_text())
         if "error" in r:
-            failed += 1
             continue
         key = (robot_label(c.robot), f"{c.calibrator}-{c.variant}", c.scale)
         rows.setdefault(key, []).append(r["injected"]["score"]["recovery"]["rms_error_deg"])
     print(f"{'robot':<12} {'calibrator-variant':<22} {'scale':>6} {'recovery RMS (deg), mean ± std':>32}")
     for (robot, name, scale), v in sorted(rows.items()):
         print(f"{robot:<12} {name:<22} {scale:>6g} {np.mean(v):>20.4f} ± {np.std(v):.4f}")
-    print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {failed} failed; "
+    print(f"{counts['computed']} cells computed, {counts['skipped']} already done, {len(failed)} failed; "
           f"results in {out / 'results'}")
-    return 0
+    return _exit_code(failed, len(cells))
 
 
-def _collect_overrides(a: argparse.Namespace) -> dict:
-    """The robot-fitting options bench and sweep share with collect."""
+def _collect_overrides(a: argparse.Namespace, **more) -> dict:
+    """The robot-fitting options bench and sweep share with collect (and `more` of
+    collect's fields), each checked by collect's own rules (`CollectConfig`) before
+    anything is planned."""
     from legcal_bench.errors import ConfigError
+    from legcal_bench.protocol.collect import CollectConfig
 
     if a.mjcf is not None and (a.robots is None or len(a.robots) != 1):
         raise ConfigError("--mjcf replaces one robot's model: give exactly one robot with --robot")
-    out = {}
+    out = dict(more)
     if a.mjcf is not None:
         out["mjcf"] = a.mjcf
     if a.stances is not None:
@@ -128,6 +164,7 @@ def _collect_overrides(a: argparse.Namespace) -> dict:
 
         resolve_offsets(a.native, load_robot("a3"), np.random.default_rng(0))  # a bad spec fails here
         out["native"] = a.native
+    CollectConfig(**{k: v for k, v in out.items() if k not in ("native", "protocol", "mjcf")})  # collect's rules
     return out
 
 
@@ -141,7 +178,8 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
                         "stance that separates a knee encoder scale); held-out sessions follow them")
     p.add_argument("--sensors", default=None, help="sensor preset, as in collect (default: the suite's, realistic)")
     p.add_argument("--period-scale", type=float, default=None,
-                   help="slower posture motion, as in collect (default 1; stance seconds are not scaled with it)")
+                   help="slower posture motion, as in collect: a factor in [0.1, 10] (default 1; stance seconds are "
+                        "not scaled with it)")
     p.add_argument("--protocol", default=None, help="a protocol file (legcal-bench design --out): its stances "
                                                     "instead of the suite's")
     p.add_argument("--native", default=None,
@@ -239,9 +277,10 @@ def add_commands(sub) -> None:
     bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the leaderboard")
     bn.add_argument("--suite", default="smoke", help=f"one of: {suites}")
     _robot_options(bn, None)
-    bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes")
-    bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds (closed-loop: "
-                                                             "trials)")
+    bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes: kinematic, weld, "
+                                                             "contact")
+    bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds, at least 1 "
+                                                             "(closed-loop: trials)")
     bn.add_argument("--effect-seeds", type=int, default=None,
                     help="modelgap suite: seeds per library effect (default --seeds; clean sets are 2x --seeds, the "
                          "near-threshold, multi-effect and outside cases --seeds each)")
@@ -255,36 +294,45 @@ def add_commands(sub) -> None:
     bn.add_argument("--calibrators", nargs="+", default=None,
                     help="only these registered calibrators (modelgap suite: the one whose offsets every diagnosis "
                          "starts from, default interfoot)")
-    bn.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-    bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead")
-    bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached")
-    bn.add_argument("--out", default="leaderboard", help="leaderboard root: results/ and README.md (default leaderboard)")
-    bn.add_argument("--quiet", action="store_true")
-    bn.set_defaults(func=cmd_bench)
+    bn.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
+    bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead; "
+                                                      "refused at once if nothing answers there")
+    bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached (a writable folder; "
+                                                              "default runs/bench/data)")
+    bn.add_argument("--out", default="leaderboard", help="leaderboard root: results/ and README.md (a writable folder; "
+                                                         "default leaderboard). Exit code 1 if a cell failed (the "
+                                                         "summary says how many and why), 2 for a refused option")
+    bn.add_argument("--quiet", action="store_true", help="no progress bars")
+    bn.set_defaults(func=cmd_bench, resume=RESUME_CELLS)
 
     cp = sub.add_parser("compare", help="two result folders (e.g. a designed protocol's and the default's) "
                                         "paired seed by seed, per calibrator variant")
     cp.add_argument("--a", required=True, help="result folder A (e.g. leaderboard/designed_a2/results)")
     cp.add_argument("--b", required=True, help="result folder B (e.g. leaderboard/results)")
-    cp.add_argument("--robot", required=True)
-    cp.add_argument("--mode", default="weld")
+    cp.add_argument("--robot", required=True, help="robot whose cells to pair (as named in the result files)")
+    cp.add_argument("--mode", default="weld", help="floor mode of the cells to pair (default weld)")
     cp.add_argument("--metric", default="recovery_rms", help="a leaderboard metric key (default recovery_rms)")
     cp.set_defaults(func=cmd_compare)
 
     sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask")
     _robot_options(sw, ["a2", "a3"])
-    sw.add_argument("--calibrators", nargs="+", default=None)
-    sw.add_argument("--mode", default="weld")
-    sw.add_argument("--seeds", type=int, default=3)
-    sw.add_argument("--scales", nargs="+", type=float, default=[0.5, 1.0, 2.0], help="multiples of the paper's injection")
-    sw.add_argument("--stance-seconds", type=float, default=12.0)
-    sw.add_argument("--heldout", type=int, default=3)
-    sw.add_argument("--workers", type=int, default=2)
-    sw.add_argument("--scheduler", default=None, help="Dask scheduler address")
-    sw.add_argument("--out", default="runs/sweep")
-    sw.add_argument("--quiet", action="store_true")
-    sw.set_defaults(func=cmd_sweep)
+    sw.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators (default all)")
+    sw.add_argument("--mode", default="weld", help="floor mode: kinematic, weld or contact (default weld)")
+    sw.add_argument("--seeds", type=int, default=3, help="seeds per robot and scale, at least 1 (default 3)")
+    sw.add_argument("--scales", nargs="+", type=float, default=[0.5, 1.0, 2.0],
+                    help="multiples of the paper's injection, each > 0 (default 0.5 1 2)")
+    sw.add_argument("--stance-seconds", type=float, default=12.0, help="seconds of each stance, as in collect "
+                                                                       "(default 12)")
+    sw.add_argument("--heldout", type=int, default=3, help="held-out sessions, as in collect (default 3)")
+    sw.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
+    sw.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786); refused at once if "
+                                                      "nothing answers there")
+    sw.add_argument("--out", default="runs/sweep", help="a writable folder for data/ and results/ (default "
+                                                        "runs/sweep). Exit code 1 if a cell failed, 2 for a refused "
+                                                        "option")
+    sw.add_argument("--quiet", action="store_true", help="no progress bars")
+    sw.set_defaults(func=cmd_sweep, resume=RESUME_CELLS)
 
     lb = sub.add_parser("leaderboard", help="regenerate leaderboard/README.md and plots from the result files")
-    lb.add_argument("--out", default="leaderboard")
+    lb.add_argument("--out", default="leaderboard", help="leaderboard root holding results/ (default leaderboard)")
     lb.set_defaults(func=cmd_leaderboard)

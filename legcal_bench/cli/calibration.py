@@ -4,23 +4,28 @@ from __future__ import annotations
 
 import argparse
 import json
+from functools import partial
 from pathlib import Path
 
-from legcal_bench.cli.robots import robot_args
+from legcal_bench import inputs
+from legcal_bench.cli.robots import COUNT0, check_result_robot, door, robot_args
 from legcal_bench.errors import ConfigError
 
 
 def writable_parent(path: str, option: str) -> None:
-    """Create `path`'s folder now, so an unwritable output fails before the work."""
+    """Create `path`'s folder now, so an unwritable output fails before the work (and
+    refuse a folder given as the file)."""
     parent = Path(path).parent
     try:
         parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         raise ConfigError(f"{option} {path}: cannot create its folder {parent} ({e.strerror}); give a path in a "
                           "folder you can write") from None
+    inputs.output_file(option, path)
 
 
 def cmd_calibrate(a: argparse.Namespace) -> int:
+    door(a, plots=inputs.output_folder)
     from legcal_bench.calibrators.base import calibrate_training
     from legcal_bench.calibrators.registry import get_calibrator, parse_options
     from legcal_bench.data.recording import load_session
@@ -81,13 +86,24 @@ def format_result(result, names: list[str]) -> str:
 
 
 def cmd_score(a: argparse.Namespace) -> int:
+    import sys
+    import warnings
+
     from legcal_bench.calibrators.base import CalibrationResult
+    from legcal_bench.data.recording import UncheckedTruthWarning
     from legcal_bench.evaluation.scoring import score
     from legcal_bench.robots import load_robot
 
     result = CalibrationResult.load(a.result)
     legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot))
-    s = score(a.bags, result, legmap, allow_partial=a.allow_partial)
+    with warnings.catch_warnings(record=True) as caught:  # ground truth that cannot be checked: said, once
+        warnings.simplefilter("always", UncheckedTruthWarning)
+        s = score(a.bags, result, legmap, allow_partial=a.allow_partial)
+    for w in caught:
+        if not issubclass(w.category, UncheckedTruthWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    for text in dict.fromkeys(str(w.message) for w in caught if issubclass(w.category, UncheckedTruthWarning)):
+        print(f"legcal-bench score: warning: {text}", file=sys.stderr)
     if not a.residuals:
         s.get("heldout", {}).pop("foot_height_residuals_mm", None)
     if a.json:
@@ -122,9 +138,13 @@ def cmd_check(a: argparse.Namespace) -> int:
     from legcal_bench.robots.kinematics import LegKinematics
 
     legmap = load_robot(a.robot, a.mjcf)
-    recs = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
+    result = None
     if a.result:
-        dq, offsets_from = CalibrationResult.load(a.result).offsets_vector(legmap.joint_names), a.result
+        result = CalibrationResult.load(a.result)
+        check_result_robot("--result", a.result, result, legmap)
+    recs = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
+    if result is not None:
+        dq, offsets_from = result.offsets_vector(legmap.joint_names), a.result
     else:  # offsets of a few degrees would read as defects: profiled out by the framework's fit
         from legcal_bench.estimation.checks.profile import profiled_offsets
 
@@ -159,6 +179,10 @@ def cmd_check(a: argparse.Namespace) -> int:
 def cmd_design(a: argparse.Namespace) -> int:
     """Predicted information of the default stances against a greedy E-optimal choice
     of sampled stances, each screened in simulation for the hold check (weld, contact)."""
+    door(a, count=inputs.count, frames=inputs.count, candidates=inputs.count, seed=inputs.seed,
+         margin=partial(inputs.number, low=0.0, low_open=True, high=1.0,
+                        fix="a fraction of the pelvis hold limit"),
+         contact_seeds=COUNT0, weld_seeds=COUNT0, budget=inputs.number, out=inputs.output_file, plot=inputs.output_file)
     from legcal_bench.estimation.information.design import design
     from legcal_bench.protocol.stances import STANCES, stances_for
     from legcal_bench.robots import load_robot
@@ -230,6 +254,8 @@ def cmd_design(a: argparse.Namespace) -> int:
 def cmd_excite(a: argparse.Namespace) -> int:
     """A learned open-loop excitation policy on the static env's information-gain reward,
     against no motion and the protocol's motion."""
+    door(a, frames=inputs.count, iterations=inputs.count, population=inputs.count, elite=inputs.count,
+         seed=inputs.seed, out=inputs.output_file)
     from legcal_bench.evaluation.excitation import learn_excitation
     from legcal_bench.provenance import code_version, describe
 
@@ -258,6 +284,8 @@ def cmd_excite(a: argparse.Namespace) -> int:
 
 
 def cmd_export(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_file, ros2_params=inputs.output_file, urdf_out=inputs.output_file,
+         mjcf_out=inputs.output_folder)
     from legcal_bench.calibrators.base import CalibrationResult
     from legcal_bench.robots import load_robot
     from legcal_bench.robots.export import (FK_TOL, check_urdf_fold, fold_into_mjcf, fold_into_urdf,
@@ -310,6 +338,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
 
     if a.walk_trials < 1:
         raise ConfigError(f"--walk-trials {a.walk_trials}: give at least 1")
+    door(a, out=inputs.output_folder)
     res, cal = None, None
     if a.result:
         if a.option:
@@ -320,8 +349,9 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
             raise ConfigError(f"--result: {e}; give the file legcal-bench calibrate --out wrote") from None
     else:  # a bad name or option fails before any data is read
         cal = get_calibrator(a.calibrator, **parse_options(a.calibrator, a.option))
-    writable_parent(a.out, "--out")
     legmap = load_robot(a.robot, a.mjcf)
+    if res is not None:
+        check_result_robot("--result", a.result, res, legmap)
     if a.walk:
         from legcal_bench.policies.runner import PolicyRunner
 
@@ -365,20 +395,23 @@ def add_commands(sub) -> None:
     robot_args(dg)
     dg.add_argument("--bags", required=True, help="directory of recordings")
     dg.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
-    dg.add_argument("--result", default=None, help="a calibrate result JSON of any calibrator: the diagnosis's fit "
-                                                   "starts from its offsets (default: run --calibrator now)")
+    dg.add_argument("--result", default=None, help="a calibrate result JSON of any calibrator, for this robot: the "
+                                                   "diagnosis's fit starts from its offsets (default: run "
+                                                   "--calibrator now)")
     dg.add_argument("--calibrator", default="interfoot", help="registered calibrator whose offsets the diagnosis "
                                                               "starts from, when no --result (default interfoot)")
     dg.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="an option of --calibrator, typed from its constructor (repeatable)")
     dg.add_argument("--effects", nargs="+", default=None, help="candidate library effects (default: all registered)")
-    dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png")
+    dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png (checked "
+                                                 "writable before the diagnosis)")
     dg.add_argument("--walk", default=None, metavar="POLICY",
                     help="closed loop before/after: walk this policy (a built-in walker name or a spec YAML) with the "
                          "true offsets (the recordings' ground truth; for real logs, the diagnosis's final estimate) "
                          "corrected by the offsets-only estimate and by the estimate after the diagnosis")
-    dg.add_argument("--walk-trials", type=int, default=5, help="seeds of the --walk comparison (default 5)")
-    dg.add_argument("--quiet", action="store_true")
+    dg.add_argument("--walk-trials", type=int, default=5, help="seeds of the --walk comparison, at least 1 "
+                                                               "(default 5)")
+    dg.add_argument("--quiet", action="store_true", help="no progress output")
     dg.set_defaults(func=cmd_diagnose)
 
     k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
@@ -402,17 +435,18 @@ def add_commands(sub) -> None:
                         "the result holds the offsets before and after, each parameter with its posterior standard "
                         "deviation, and what the data confound it with")
     k.add_argument("--out", default="result.json", help="result JSON (default result.json)")
-    k.add_argument("--plots", default=None, help="directory for the observability plot")
+    k.add_argument("--plots", default=None, help="directory for the observability plot (default: none drawn)")
     k.set_defaults(func=cmd_calibrate)
 
     sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings")
-    sc.add_argument("--bags", required=True)
+    sc.add_argument("--bags", required=True, help="directory of recordings with their ground truth (collect --out); "
+                                                  "truth files of another session set are refused")
     sc.add_argument("--allow-partial", action="store_true",
                     help="read a folder without session.json (every *.npz in it), e.g. your own logs; "
                          "otherwise refused, as a collection that may have stopped half-way")
-    sc.add_argument("--result", required=True)
+    sc.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out)")
     sc.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
-    sc.add_argument("--json", action="store_true")
+    sc.add_argument("--json", action="store_true", help="print the scores as JSON")
     sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
     sc.set_defaults(func=cmd_score)
 
@@ -421,27 +455,29 @@ def add_commands(sub) -> None:
     robot_args(ck)
     ck.add_argument("--bags", required=True, help="directory of recordings")
     ck.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
-    ck.add_argument("--result", default=None, help="also judge the data corrected by this result's offsets "
+    ck.add_argument("--result", default=None, help="also judge the data corrected by this result's (this robot's) "
+                                                   "offsets "
                                                    "(the calibrators do this with their own); default: the "
                                                    "offsets profiled out by the framework's own fit of the data")
-    ck.add_argument("--json", action="store_true")
+    ck.add_argument("--json", action="store_true", help="print the statistics and warnings as JSON")
     ck.set_defaults(func=cmd_check)
 
     de = sub.add_parser("design", help="stance design: the default stances' predicted information against a "
                                        "greedy E-optimal choice of sampled stances the robot holds in simulation "
                                        "(same frame count)")
     robot_args(de)
-    de.add_argument("--count", type=int, default=4, help="stances to choose (default 4)")
+    de.add_argument("--count", type=int, default=4, help="stances to choose, at least 1 (default 4)")
     de.add_argument("--frames", type=int, default=2400, help="frame budget of the stances in all, at 50 Hz (default "
                                                              "2400: the default protocol's four 12 s stances); "
                                                              "both protocols get it")
     de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
-    de.add_argument("--seed", type=int, default=0)
+    de.add_argument("--seed", type=int, default=0, help="candidate sampling seed (default 0)")
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
     de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
-    de.add_argument("--margin", type=float, default=0.75, help="hold screen, weld: the fraction of the pelvis hold "
-                                                               "limit a chosen stance must stay within (default 0.75)")
+    de.add_argument("--margin", type=float, default=0.75, help="hold screen, weld: the fraction (0 to 1] of the "
+                                                               "pelvis hold limit a chosen stance must stay within "
+                                                               "(default 0.75)")
     de.add_argument("--contact-seeds", type=int, default=4, help="hold screen: contact-mode seeds, at the hold limits "
                                                                   "(default 4; 0 skips contact)")
     de.add_argument("--weld-seeds", type=int, default=8, help="hold screen: weld-mode seeds (placement jitter, motion "
@@ -456,21 +492,22 @@ def add_commands(sub) -> None:
                                                 "collect/bench --protocol")
     de.add_argument("--plot", default=None, help="write a PNG: smallest eigenvalues and per-offset predicted std, "
                                                  "default against designed")
-    de.add_argument("--json", action="store_true")
+    de.add_argument("--json", action="store_true", help="print the design as JSON")
     de.set_defaults(func=cmd_design)
 
     xc = sub.add_parser("excite", help="learn an open-loop excitation motion on the static env's information-gain "
                                        "reward (cross-entropy method), against no motion and the protocol's")
     robot_args(xc)
     xc.add_argument("--stance", default="I", help="stance (default I)")
-    xc.add_argument("--mode", default="weld", choices=["kinematic", "weld", "contact"])
+    xc.add_argument("--mode", default="weld", choices=["kinematic", "weld", "contact"], help="floor model "
+                                                                                          "(default weld)")
     xc.add_argument("--frames", type=int, default=600, help="frames per episode (default 600 = 12 s at 50 Hz)")
-    xc.add_argument("--iterations", type=int, default=6)
+    xc.add_argument("--iterations", type=int, default=6, help="cross-entropy iterations, at least 1 (default 6)")
     xc.add_argument("--population", type=int, default=12, help="episodes per iteration (default 12)")
     xc.add_argument("--elite", type=int, default=3, help="best episodes the next iteration is fitted to (default 3)")
-    xc.add_argument("--seed", type=int, default=0)
-    xc.add_argument("--out", default=None, help="write the result as JSON")
-    xc.add_argument("--json", action="store_true")
+    xc.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
+    xc.add_argument("--out", default=None, help="write the result as JSON (a file)")
+    xc.add_argument("--json", action="store_true", help="print the result as JSON")
     xc.set_defaults(func=cmd_excite)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "

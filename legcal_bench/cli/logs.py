@@ -6,9 +6,11 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import asdict
+from functools import partial
 
-
-from legcal_bench.cli.robots import robot_args
+from legcal_bench import inputs
+from legcal_bench.cli.robots import door, robot_args
+from legcal_bench.sim.names import SENSOR_PRESET_NAMES
 
 LOG_FORMATS = ("mcap", "sqlite3", "ros1", "csv", "parquet")
 
@@ -20,6 +22,7 @@ def cmd_import(a: argparse.Namespace) -> int:
     from legcal_bench.logs.timeline import format_timeline
     from legcal_bench.robots import load_robot
 
+    door(a, out=inputs.output_folder)
     legmap = load_robot(a.robot, a.mjcf)
     if a.example_map:
         print(example_mapping(legmap), end="")
@@ -35,6 +38,7 @@ def cmd_import(a: argparse.Namespace) -> int:
 
 
 def cmd_simulate_log(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seed=inputs.seed, sensors=partial(inputs.choice, options=SENSOR_PRESET_NAMES))
     from legcal_bench.api.logs import simulate_log
 
     out = simulate_log(a.robot, a.out, fmt=a.format, seed=a.seed, ft=not a.no_ft, sensors=a.sensors,
@@ -80,8 +84,10 @@ def add_commands(sub) -> None:
     robot_args(sl)
     sl.add_argument("--format", default="mcap", choices=LOG_FORMATS, help="log format (default mcap)")
     sl.add_argument("--out", required=True, help="new folder for the log, mapping.yaml and truth.json")
-    sl.add_argument("--seed", type=int, default=0, help="offsets, noise and placement seed (default 0)")
-    sl.add_argument("--sensors", default="realistic", help="sensor preset (default realistic)")
+    sl.add_argument("--seed", type=int, default=0, help="offsets, noise and placement seed: an integer in "
+                                                        "[0, 2^32 - 1] (default 0)")
+    sl.add_argument("--sensors", default="realistic", help=f"sensor preset: {', '.join(SENSOR_PRESET_NAMES)} "
+                                                           "(default realistic)")
     sl.add_argument("--no-ft", action="store_true", help="log no ankle force/torque (default: log them)")
     sl.add_argument("--unknown-sensors", action="store_true",
                     help="write `sensor_model: unknown` in the mapping (default: the preset's declaration)")
@@ -108,6 +114,7 @@ def add_commands(sub) -> None:
 
 
 def cmd_report(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder)
     from legcal_bench.reports.calibration_report import write_calibration_report
 
     page = write_calibration_report(a.bags, a.result, a.out, robot=a.robot)

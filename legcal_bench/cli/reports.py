@@ -50,9 +50,8 @@ def cmd_robots_check(a: argparse.Namespace) -> int:
 
 
 def cmd_regression(a: argparse.Namespace) -> int:
-    import tempfile
-
     from legcal_bench.errors import ConfigError
+    from legcal_bench.files.scratch import scratch_dir
     from legcal_bench.reports import regression
 
     if a.update:
@@ -61,7 +60,7 @@ def cmd_regression(a: argparse.Namespace) -> int:
         return 0
     if not Path(a.fixture).is_file():
         raise ConfigError(f"--fixture {a.fixture}: no such file (run from a checkout, or give its path)")
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("regression") as tmp:
         problems = regression.compare(regression.load_fixture(a.fixture),
                                       regression.compute(Path(tmp), workers=a.workers, progress=not a.quiet))
     for p in problems:

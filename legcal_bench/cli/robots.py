@@ -5,7 +5,39 @@ from __future__ import annotations
 import argparse
 import json
 from dataclasses import asdict
+from functools import partial
 from pathlib import Path
+
+from legcal_bench import inputs
+from legcal_bench.errors import ConfigError
+
+
+def door(a: argparse.Namespace, **checks) -> None:
+    """Options checked at the door, before any work: `checks` maps an option's dest to a
+    check of `legcal_bench.inputs` (called as check(option, value)); an option not given
+    (None) passes, a list is checked item by item. The ConfigError names the option, the
+    value and the fix; the command prints it in one line and exits 2."""
+    for dest, check in checks.items():
+        value = getattr(a, dest)
+        option = "--" + dest.replace("_", "-")
+        for v in value if isinstance(value, list) else [value]:
+            if v is not None:
+                check(option, v)
+
+
+# Checks `door` takes, beside inputs.seed, inputs.positive, inputs.count, inputs.output_folder, inputs.output_file.
+COUNT0 = partial(inputs.count, low=0)  # a count where none is meaningful
+
+
+def check_result_robot(option: str, path, result, legmap) -> None:
+    """A calibration result used on a robot (a correction, a start, a reference) must
+    have been calibrated for it: another robot's offsets, even under the same joint
+    names, are that robot's. ConfigError naming both robots."""
+    if result.robot != legmap.name:
+        spec = result.settings.get("robot_spec", result.robot)
+        raise ConfigError(
+            f"{option} {path}: calibrated for robot {result.robot!r}, but the robot here is {legmap.name!r}: its "
+            f"offsets are {result.robot}'s; give a result calibrated for {legmap.name}, or --robot {spec}")
 
 
 def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
@@ -79,6 +111,7 @@ def cmd_info(a: argparse.Namespace) -> int:
 
 
 def cmd_render(a: argparse.Namespace) -> int:
+    door(a, seed=inputs.seed, out=inputs.output_file)
     from PIL import Image
 
     from legcal_bench.envs.static_double_support import StaticDoubleSupportEnv
@@ -99,13 +132,14 @@ def cmd_render(a: argparse.Namespace) -> int:
 def add_commands(sub) -> None:
     i = sub.add_parser("info", help="list robots, or show one robot's joint order, axes and limits")
     robot_args(i, default=None)
-    i.add_argument("--json", action="store_true")
+    i.add_argument("--json", action="store_true", help="print the robot's description as JSON")
     i.set_defaults(func=cmd_info)
 
     r = sub.add_parser("render", help="PNG of a robot in a stance (offscreen)")
     robot_args(r)
     r.add_argument("--stance", default="I", help="I, II, III, IV or standing (default I)")
-    r.add_argument("--mode", default="kinematic", choices=("kinematic", "weld", "contact"))
-    r.add_argument("--seed", type=int, default=0)
-    r.add_argument("--out", default="robot.png")
+    r.add_argument("--mode", default="kinematic", choices=("kinematic", "weld", "contact"),
+                   help="floor model (default kinematic)")
+    r.add_argument("--seed", type=int, default=0, help="placement seed (default 0)")
+    r.add_argument("--out", default="robot.png", help="PNG file to write (default robot.png)")
     r.set_defaults(func=cmd_render)

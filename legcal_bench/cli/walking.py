@@ -6,21 +6,30 @@ from __future__ import annotations
 
 import argparse
 import json
+from functools import partial
 
-from legcal_bench.cli.robots import robot_args
+from legcal_bench import inputs
+from legcal_bench.cli.robots import COUNT0, check_result_robot, door, robot_args
 from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
 
+SENSORS = partial(inputs.choice, options=SENSOR_PRESET_NAMES)
+
 
 def _correction(path, legmap):
+    """The offsets of the calibration result at `path`, which must be `legmap`'s robot's."""
     if path is None:
         return None
     from legcal_bench.calibrators.base import CalibrationResult
 
-    return CalibrationResult.load(path).offsets_vector(legmap.joint_names)
+    result = CalibrationResult.load(path)
+    check_result_robot("--correction", path, result, legmap)
+    return result.offsets_vector(legmap.joint_names)
 
 
 def cmd_walk(a: argparse.Namespace) -> int:
+    door(a, seconds=inputs.positive, trials=COUNT0, seed=inputs.seed, strip_every=inputs.positive, sensors=SENSORS,
+         out=inputs.output_file, strip=inputs.output_file)
     import numpy as np
 
     from legcal_bench.envs.walking import WalkingEnv
@@ -28,25 +37,25 @@ def cmd_walk(a: argparse.Namespace) -> int:
     from legcal_bench.evaluation.walk import trial_offsets, walk, walk_trials
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.provenance import code_version, describe
+    from legcal_bench.robots import load_robot
 
-    if a.seconds <= 0 or a.trials < 0:
-        raise ConfigError(f"--seconds {a.seconds} / --trials {a.trials}: need seconds > 0 and trials >= 0")
     if (a.policy is None) == (a.teacher is None):
         raise ConfigError("give --policy SPEC (a policy) or --teacher RECIPE (the model-based teacher), not both")
+    legmap = load_robot(a.robot, a.mjcf)
+    correction = _correction(a.correction, legmap)  # another robot's result fails here, before the walk
+    trial_offsets(a.offsets, legmap, a.seed)  # and a bad offsets spec
     render = dict(render_mode="rgb_array" if a.strip else None, width=320, height=400)
     if a.teacher is not None:
         from legcal_bench.envs.walking import teacher_walking_config
         from legcal_bench.policies.zmp_walker import ZmpWalker, load_teacher_recipe
-        from legcal_bench.robots import load_robot
 
-        legmap, recipe = load_robot(a.robot, a.mjcf), load_teacher_recipe(a.teacher)
+        recipe = load_teacher_recipe(a.teacher)
         runner = ZmpWalker(legmap, a.seconds, recipe.gait, recipe.feedback)
         env = WalkingEnv(robot=legmap, sensors=a.sensors, walking=teacher_walking_config(legmap, recipe, runner),
                          **render)
     else:
         env = WalkingEnv(robot=a.robot, policy=a.policy, sensors=a.sensors, mjcf=a.mjcf, **render)
         runner = PolicyRunner(env.policy_spec, env.legmap)
-    correction = _correction(a.correction, env.legmap)
     code = describe(code_version())
     who = f"--policy {a.policy}" if a.policy is not None else f"--teacher {a.teacher}"
     made_by = (f"legcal-bench walk --robot {a.robot} {who} --offsets {a.offsets} --seconds {a.seconds:g} "
@@ -109,22 +118,24 @@ def cmd_walk(a: argparse.Namespace) -> int:
 
 
 def cmd_walk_eval(a: argparse.Namespace) -> int:
+    door(a, trials=inputs.count, seconds=inputs.positive, sweep=inputs.positive, workers=inputs.count,
+         sensors=SENSORS, static_sensors=SENSORS, out=inputs.output_folder)
+    from legcal_bench.benchmark.runner import check_scheduler
     from legcal_bench.calibrators.registry import get_calibrator, parse_options
-    from legcal_bench.errors import ConfigError
     from legcal_bench.evaluation.closed_loop import TRIALS_DIR, ClosedLoopConfig, calibrator_options, evaluate, keep_trials
     from legcal_bench.evaluation.walk import trial_offsets
     from legcal_bench.provenance import code_version, describe
     from legcal_bench.reports.closed_loop import write
     from legcal_bench.sim.offsets import with_magnitude
 
-    if a.trials < 1 or a.seconds <= 0:
-        raise ConfigError(f"--trials {a.trials} / --seconds {a.seconds}: need trials >= 1 and seconds > 0")
+    if a.scheduler:
+        check_scheduler(a.scheduler)
     options = calibrator_options(a.calibrator)
     if a.setting:
         options["setting"] = a.setting
     options.update(parse_options(a.calibrator, a.option))
     offsets = [a.offsets] if not a.sweep else [with_magnitude(a.offsets, d) for d in a.sweep]
-    from legcal_bench.benchmark.runner import make_executor
+    from legcal_bench.benchmark.runner import executing
     from legcal_bench.policies.runner import PolicyRunner
     from legcal_bench.robots import load_robot
 
@@ -133,9 +144,8 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
     PolicyRunner(a.policy, legmap)  # a bad spec or robot fails here, before any worker
     for off in offsets:
         trial_offsets(off, legmap, 0)  # and a bad offsets spec
-    executor, client = make_executor(a.scheduler, a.workers) if a.workers > 1 or a.scheduler else (None, None)
     summaries, trials = [], []
-    try:
+    with executing(a.scheduler, a.workers) as executor:
         with keep_trials(a.out) as store:  # each trial written as it finishes; a rerun takes the finished ones
             for off in offsets:
                 cfg = ClosedLoopConfig(robot=a.robot, policy=a.policy, offsets=off, trials=a.trials, seconds=a.seconds,
@@ -144,11 +154,6 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
                 s, t = evaluate(cfg, executor, progress=not a.quiet)
                 summaries.append(s)
                 trials.append(t)
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        if client is not None:
-            client.close()
     made_by = (f"legcal-bench walk-eval --robot {a.robot}" + (f" --mjcf {a.mjcf}" if a.mjcf else "")
                + f" --policy {a.policy} --offsets {a.offsets} --trials {a.trials} "
                f"--seconds {a.seconds:g} --calibrator {a.calibrator}" + (f" --setting {a.setting}" if a.setting else "")
@@ -175,9 +180,15 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
 
 
 def cmd_train_policy(a: argparse.Namespace) -> int:
+    from legcal_bench.errors import ConfigError
+
+    door(a, seed=inputs.seed, offsets_deg=inputs.non_negative, out=inputs.output_folder)
+    if a.iterations < 1 or a.rollouts < 1:
+        raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
+    if a.selection_walks < 0:
+        raise ConfigError(f"--selection-walks {a.selection_walks}: need 0 or more random patterns")
     from pathlib import Path
 
-    from legcal_bench.errors import ConfigError
     from legcal_bench.evaluation.distill import DistillConfig, export, train  # the training module's (tests shorten it)
     from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
     from legcal_bench.policies.spec import WALKERS_DIR
@@ -193,10 +204,6 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
                               f"{TEACHERS_DIR}, format legcal-teacher/1) and pass --teacher FILE")
         teacher = TEACHERS_DIR / f"{a.robot}.yaml"
     recipe = load_teacher_recipe(teacher)
-    if a.iterations < 1 or a.rollouts < 1:
-        raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
-    if a.selection_walks < 0:
-        raise ConfigError(f"--selection-walks {a.selection_walks}: need 0 or more random patterns")
     cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed,
                         eval_rollouts=a.selection_walks)
     name = a.name or f"legcal_{legmap.name}_walker"
@@ -247,25 +254,30 @@ def add_commands(sub) -> None:
                                                         "(a pattern per trial: trial s draws from seed 20000 + s), "
                                                         "random:<deg>@<seed> (the same, trial s from seed <seed> + s), "
                                                         "or one radian per leg joint, comma-separated")
-    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg) to sweep, e.g. 1 2 3 "
+    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg, > 0) to sweep, e.g. 1 2 3 "
                                                                         "(replacing <deg> of paper@ or random:)")
-    e.add_argument("--trials", type=int, default=35)
-    e.add_argument("--seconds", type=float, default=20.0)
-    e.add_argument("--calibrator", default="interfoot")
+    e.add_argument("--trials", type=int, default=35, help="trials per offsets magnitude, at least 1 (default 35)")
+    e.add_argument("--seconds", type=float, default=20.0, help="seconds of each walk, > 0 (default 20)")
+    e.add_argument("--calibrator", default="interfoot", help="registered calibrator of the static calibration "
+                                                             "(default interfoot)")
     e.add_argument("--setting", default=None, help="the calibrator's setting (default: its sensor-matched variant "
                                                    "where it has one)")
     e.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 (repeatable)")
     e.add_argument("--static-sensors", default="calibrated-imu", help="sensors of the static session sets "
                                                                       "(default calibrated-imu; also realistic)")
-    e.add_argument("--sensors", default="realistic", help="sensors while walking")
-    e.add_argument("--workers", type=int, default=2, help="local worker processes (default 2; 1 runs here)")
-    e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786)")
+    e.add_argument("--sensors", default="realistic", help=f"sensors while walking: {', '.join(SENSOR_PRESET_NAMES)} "
+                                                          "(default realistic)")
+    e.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2; 1 runs "
+                                                          "here)")
+    e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786), checked reachable "
+                                                     "before any trial")
     e.add_argument("--out", default="reports/walk_eval", help="report folder (report.md, report.json, paths.png, "
                                                                 "timings.json) with each finished trial in "
                                                                 "trials/; rerun into it to resume an interrupted run")
-    e.add_argument("--quiet", action="store_true")
-    e.set_defaults(func=cmd_walk_eval)
+    e.add_argument("--quiet", action="store_true", help="no progress bar")
+    e.set_defaults(func=cmd_walk_eval, resume="the finished trials are kept in --out's trials/; rerun the same "
+                                             "command into it to resume")
 
     _train_policy_options(sub.add_parser("train-policy", help="train our walking policy from scratch: the "
                                                               "model-based teacher (ZMP preview gait + IMU balance "
@@ -281,16 +293,19 @@ def _walk_options(w: argparse.ArgumentParser) -> None:
                                                    "(e.g. policies/teachers/a3.yaml)")
     w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "
                                                      "random:<deg> draws one pattern per seed")
-    w.add_argument("--correction", default=None, help="a calibration result JSON: its offsets are applied as the "
-                                                      "robot applies them (q_enc + dq_hat)")
-    w.add_argument("--seconds", type=float, default=20.0)
-    w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk)")
-    w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets")
+    w.add_argument("--correction", default=None, help="a calibration result JSON of this robot: its offsets are "
+                                                      "applied as the robot applies them (q_enc + dq_hat)")
+    w.add_argument("--seconds", type=float, default=20.0, help="seconds to walk, > 0 (default 20)")
+    w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk): an integer in "
+                                                       "[0, 2^32 - 1] (default 0)")
+    w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets "
+                                                         "(default 0: one walk)")
     w.add_argument("--sensors", default="realistic", help=f"sensor preset: {', '.join(SENSOR_PRESET_NAMES)}")
-    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG)")
-    w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames (default 2)")
-    w.add_argument("--out", default=None, help="write the walk (or trials) as JSON")
-    w.add_argument("--json", action="store_true")
+    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG file)")
+    w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames, > 0 (default 2)")
+    w.add_argument("--out", default=None, help="write the walk (or trials) as JSON (a file; checked writable before "
+                                               "the walk)")
+    w.add_argument("--json", action="store_true", help="print the summary as JSON")
     w.set_defaults(func=cmd_walk)
 
 
@@ -307,9 +322,9 @@ def _train_policy_options(t: argparse.ArgumentParser) -> None:
     t.add_argument("--selection-walks", type=int, default=DistillConfig.eval_rollouts,
                    help="random offset patterns (besides none and paper@3) the pure student walks after each "
                         f"iteration to choose the checkpoint (default {DistillConfig.eval_rollouts})")
-    t.add_argument("--seed", type=int, default=0)
+    t.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
     t.add_argument("--name", default=None, help="the policy's name in its spec")
     t.add_argument("--out", default=None, help="output folder (default policies/walkers/<robot>); replaced only "
                                                "if it holds an earlier training result")
-    t.add_argument("--quiet", action="store_true")
+    t.add_argument("--quiet", action="store_true", help="no progress output")
     t.set_defaults(func=cmd_train_policy)

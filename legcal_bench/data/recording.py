@@ -16,8 +16,10 @@ same checks (this tool always wrote them with a complete model and a motion).
 
 from __future__ import annotations
 
+import difflib
 import io
 import json
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -165,7 +167,11 @@ _SHAPES = {"time": (None,), "q_enc": (None, None), "imu_acc": (None, 3), "imu_gy
 _META_KEYS = ("format", "version", "name", "kind", "stance", "robot", "joint_names", "sensor_model")
 
 
-def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None = None) -> None:
+def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None = None,
+             robot: str | None = None) -> None:
+    """Refuse a recording that breaks the format (docs/recording-format.md). With
+    `joint_names` (and `robot`, the leg map's name), it must hold those leg joints, in
+    that order, of that robot."""
     if not isinstance(meta, dict):
         raise RecordingError(f"{where}: field 'meta' must be a JSON object (see docs/recording-format.md)")
     for key in _META_KEYS:
@@ -196,6 +202,8 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
     if meta["kind"] not in KINDS:
         raise RecordingError(f"{where}: field 'kind' is {meta['kind']!r}; use one of {KINDS}")
     names = list(meta["joint_names"])
+    if robot is not None and meta["robot"] != robot and (joint_names is None or names != list(joint_names)):
+        raise RecordingError(robot_mismatch(where, meta["robot"], robot, names, joint_names))
     if joint_names is not None and len(names) != len(joint_names):
         raise RecordingError(f"{where}: field 'joint_names' must list the robot's {len(joint_names)} leg joints, "
                              f"got {len(names)}")
@@ -203,11 +211,7 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
         raise RecordingError(f"{where}: field 'joint_names' must list the robot's leg joints, left leg then right "
                              f"(the same number per leg), got {len(names)}")
     if joint_names is not None and names != list(joint_names):
-        missing = [n for n in joint_names if n not in names]
-        extra = [n for n in names if n not in joint_names]
-        hint = (f"missing {missing}, unexpected {extra}" if missing or extra
-                else "same names in another order: reorder the q_enc columns to the leg map's order")
-        raise RecordingError(f"{where}: joint_names do not match the robot's leg joints ({hint})")
+        raise RecordingError(_joints_mismatch(where, meta["robot"], names, list(joint_names), robot))
     for key in ("time", "q_enc", "imu_acc", "imu_gyro"):
         if key not in arrays:
             raise RecordingError(f"{where}: missing field '{key}' (see docs/recording-format.md)")
@@ -252,21 +256,92 @@ def validate(arrays: dict, meta: dict, where: str, joint_names: list[str] | None
                 f"Hz: it looks like {unit}; 'time' must be in seconds (divide ms by 1e3, ns by 1e9)")
     q = np.asarray(arrays["q_enc"], dtype=float)
     if np.abs(q).max() > 2 * np.pi:
-        raise RecordingError(f"{where}: field 'q_enc' has |angle| up to {np.abs(q).max():.1f}, which looks like "
-                             "degrees; encoder angles must be radians (np.deg2rad)")
+        raise RecordingError(f"{where}: field 'q_enc' {_beyond_turn(q, list(meta['joint_names']))}")
     acc_norm = np.linalg.norm(np.asarray(arrays["imu_acc"], dtype=float), axis=1).mean()
     if not 3.0 < acc_norm < 30.0:
         raise RecordingError(f"{where}: field 'imu_acc' has mean norm {acc_norm:.3g}; expected specific force in "
                              "m/s^2 (about 9.81 at rest). Convert from g (x 9.81) if needed")
 
 
+SPIKE_SHARE = 0.05  # frames beyond a turn: under this share of a column, spikes; over it, the column's units
+
+
+def _beyond_turn(q: np.ndarray, names: list[str]) -> str:
+    """What an encoder column beyond a full turn (|angle| > 2 pi) most likely is, with
+    its fix: jumps of a whole turn between frames (a wrapped angle); a few frames out
+    (spikes, a glitch); else the column's unit (degrees, or a whole turn added)."""
+    out = np.abs(q) > 2 * np.pi
+    j = int(np.argmax(out.sum(axis=0)))
+    col, bad = q[:, j], np.flatnonzero(out[:, j])
+    name = names[j] if j < len(names) else f"column {j}"
+    where = (f"joint {name}: {bad.size} of {len(col)} frame(s) (first {bad[0]}) beyond a full turn, up to "
+             f"{np.abs(col).max():.4g}")
+    step = np.diff(col)
+    turns = np.abs(step) > np.pi
+    if turns.any() and np.all(np.abs(np.abs(step[turns]) - 2 * np.pi) < 0.5):  # one turn up or down
+        return (f"{where}, jumping by whole turns (2 pi) between frames: a wrapped angle; unwrap it "
+                "(numpy.unwrap) before saving")
+    if bad.size <= SPIKE_SHARE * len(col):
+        return (f"{where}, while the others stay within {np.abs(np.delete(col, bad)).max(initial=0.0):.3g} rad: "
+                "spikes (a glitch of the log); drop or repair those frames")
+    return (f"{where}, which looks like degrees (or a whole turn added); encoder angles must be radians "
+            "(numpy.deg2rad), within a turn of the joint's zero")
+
+
+def robot_mismatch(where: str, recorded: str, robot: str, names: list[str] | None = None,
+                   joint_names: list[str] | None = None) -> str:
+    """The message for recordings of robot `recorded` read with the leg map of `robot`:
+    the robot chosen is blamed (--robot), not the recording."""
+    differ = ""
+    if names is not None and joint_names is not None and names != list(joint_names):
+        differ = (" (their leg joints differ too: the same names in another order)" if sorted(names) ==
+                  sorted(joint_names) else " (their leg joints differ too)")
+    return (f"{where}: field 'robot' is {recorded!r} but the leg map is {robot!r}{differ}: recordings of one robot "
+            f"calibrated as another give wrong offsets; pass that robot's leg map (--robot {recorded}, or its "
+            "leg-map file), or fix the recording's 'robot' field if it is the same robot")
+
+
+def _joints_mismatch(where: str, recorded: str, names: list[str], joint_names: list[str],
+                     robot: str | None) -> str:
+    """The message for a recording whose joint names are not the leg map's: which side
+    to fix depends on what differs. The recording names the robot it was logged on; with
+    the leg map's name `robot` the same, a name that differs is the leg map's or the
+    recording's spelling, and an order that differs the leg map's joint order or the
+    recording's columns."""
+    missing = [n for n in joint_names if n not in names]
+    extra = [n for n in names if n not in joint_names]
+    if missing or extra:
+        pairs = [f"leg map {m!r} where the recording has {close[0]!r}" for m in missing
+                 for close in [difflib.get_close_matches(m, extra, n=1)] if close]
+        what = f"missing {missing}, unexpected {extra}" + (f"; {'; '.join(pairs)}" if pairs else "")
+        fix = ("check the leg map's joint names (legs.<side>.joints[].name, as the MJCF names them): a misspelt "
+               "one is the leg map's to fix; if the recording's are wrong, rename them in its 'joint_names'")
+    else:
+        what = "same names in another order"
+        fix = ("reorder the q_enc columns to the leg map's order, or, if the recording's order is the robot's, fix "
+               "the leg map's joint order (legs.<side>.joints)")
+    if robot is None:
+        fix += f"; the recording names robot {recorded!r}: if that is not the robot given, pass it (--robot)"
+    return f"{where}: joint_names do not match the robot's leg joints ({what}: {fix})"
+
+
 def _read_npz(path: Path) -> tuple[dict, dict]:
+    if path.is_dir():
+        raise RecordingError(f"{path}: is a folder, not a recording file; give a recording (.npz), or pass the folder "
+                             "where a session folder is asked for")
     if not path.is_file():
         raise RecordingError(f"{path}: no such recording")
     try:
-        with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in z.files}
+        loaded = np.load(path, allow_pickle=False)
     except Exception as e:  # noqa: BLE001 - numpy raises many types for bad files
+        raise RecordingError(f"{path}: not a readable .npz file ({e})") from None
+    if not isinstance(loaded, np.lib.npyio.NpzFile):
+        raise RecordingError(f"{path}: holds one array (a .npy file), not a .npz archive of named fields; save the "
+                             "recording with numpy.savez (see docs/recording-format.md)")
+    try:
+        with loaded as z:
+            arrays = {k: z[k] for k in z.files}
+    except Exception as e:  # noqa: BLE001
         raise RecordingError(f"{path}: not a readable .npz file ({e})") from None
     if "meta" not in arrays:
         raise RecordingError(f"{path}: missing field 'meta' (the JSON header; see docs/recording-format.md)")
@@ -277,11 +352,12 @@ def _read_npz(path: Path) -> tuple[dict, dict]:
     return arrays, meta
 
 
-def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Recording:
-    """Read and validate one recording (never its ground truth)."""
+def load_recording(path: str | Path, joint_names: list[str] | None = None, robot: str | None = None) -> Recording:
+    """Read and validate one recording (never its ground truth); with `robot` (the leg
+    map's name), a recording of another robot is refused naming both."""
     path = Path(path)
     arrays, meta = _read_npz(path)
-    validate(arrays, meta, str(path), joint_names)
+    validate(arrays, meta, str(path), joint_names, robot)
     declared = meta["sensor_model"] != UNKNOWN
     try:
         sensor = SensorModel.from_dict(meta["sensor_model"]) if declared else SensorModel.unknown()
@@ -298,8 +374,18 @@ def load_recording(path: str | Path, joint_names: list[str] | None = None) -> Re
     )
 
 
+class UncheckedTruthWarning(UserWarning):
+    """A ground-truth file without its session's identity (written before collect
+    recorded one): it cannot be checked against its recording."""
+
+
 def load_truth(path: str | Path) -> Truth:
-    """The simulator's ground truth for the recording at `path` (scoring only)."""
+    """The simulator's ground truth for the recording at `path` (scoring only). It must
+    be that recording's: the truth names its session set (meta 'session', written by
+    collect into the recording's field 'session' too), and a truth file from another
+    session set, which would score against that set's offsets, is refused naming both.
+    A truth file without the identity (written before it was recorded) is read with an
+    `UncheckedTruthWarning`."""
     tp = truth_path(path)
     arrays, meta = _read_npz(tp)
     optional = ("q_enc_clean",)
@@ -307,7 +393,30 @@ def load_truth(path: str | Path) -> Truth:
     missing = [k for k in fields_ if k not in arrays and k not in optional]
     if missing:
         raise RecordingError(f"{tp}: missing ground-truth fields {missing}")
+    _check_identity(Path(path), tp, meta)
     return Truth(**{k: arrays[k] for k in fields_ if k in arrays}, meta=meta)
+
+
+def _check_identity(path: Path, tp: Path, meta: dict) -> None:
+    session = meta.get("session")
+    if session is None:
+        warnings.warn(f"{tp.parent}: the ground-truth files name no session set (written before legcal-bench "
+                      "recorded one in each): they cannot be checked against their recordings, and truth copied from "
+                      "another session set would score against its offsets; re-collect the set to have them checked",
+                      UncheckedTruthWarning, stacklevel=3)
+        return
+    if not path.is_file():
+        return  # the truth alone (its recording checks it when both are read)
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            recorded = json.loads(str(z["meta"])).get("session")
+    except Exception:  # noqa: BLE001 - an unreadable recording is refused when it is read
+        return
+    if recorded != session:
+        raise RecordingError(
+            f"{tp}: the ground truth is of session {session!r} but its recording {path.name} is of session "
+            f"{recorded!r}: truth files from another session set score a result against that set's offsets; put "
+            "the truth files collected with these recordings beside them (or re-collect the set)")
 
 
 def write_manifest(out_dir: str | Path, manifest: dict) -> Path:
@@ -371,7 +480,8 @@ def load_session(directory: str | Path, joint_names: list[str] | None = None,
     joint limits (± `LIMIT_SLACK_RAD`, room for the offsets)."""
     if robot is not None:
         joint_names = robot.joint_names
-    recs = [load_recording(p, joint_names) for p in list_segments(directory, allow_partial)]
+    name = robot.name if robot is not None else None
+    recs = [load_recording(p, joint_names, name) for p in list_segments(directory, allow_partial)]
     if robot is not None:
         check_against_robot(recs, robot)
     return recs
@@ -385,10 +495,7 @@ def check_against_robot(recordings: list[Recording], robot: LegMap) -> None:
     """Refuse recordings of another robot, or angles no joint of this robot can reach."""
     for r in recordings:
         if r.robot != robot.name:
-            raise RecordingError(
-                f"{r.name}: field 'robot' is {r.robot!r} but the leg map is {robot.name!r}: recordings of one robot "
-                f"calibrated as another give wrong offsets; pass that robot's leg map (--robot), or fix the "
-                "recording's 'robot' field if it is the same robot")
+            raise RecordingError(robot_mismatch(r.name, r.robot, robot.name))
     lower, upper = joint_limits(robot)
     for r in recordings:
         out = (r.q_enc < lower - LIMIT_SLACK_RAD) | (r.q_enc > upper + LIMIT_SLACK_RAD)

@@ -44,7 +44,6 @@ from __future__ import annotations
 import contextvars
 import hashlib
 import json
-import tempfile
 import threading
 import time
 from contextlib import contextmanager
@@ -55,6 +54,7 @@ import numpy as np
 
 from legcal_bench.evaluation.metrics import mean_std, rms
 from legcal_bench.evaluation.walk import deviation, trial_offsets, walk
+from legcal_bench.files.scratch import scratch_dir
 
 CONDITIONS = ("nominal", "uncorrected", "corrected", "oracle")
 STATIC_SEED_BASE = 30_000  # the static session set of trial s is collected with seed STATIC_SEED_BASE + s
@@ -165,7 +165,7 @@ def static_estimate(cfg: ClosedLoopConfig, seed: int) -> dict:
     t0 = time.perf_counter()
     failed, result, others = None, None, {}  # failed: a static session set the robot could not hold
     try:
-        with tempfile.TemporaryDirectory() as tmp:
+        with scratch_dir("closedloop") as tmp:
             collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
                                   sensors=cfg.static_sensors, seed=STATIC_SEED_BASE + seed, heldout=cfg.heldout),
                     tmp, progress=False)

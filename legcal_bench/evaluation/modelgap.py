@@ -56,6 +56,7 @@ from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expecte
                                                whitening)
 from legcal_bench.data.recording import training
 from legcal_bench.errors import NestedFitError
+from legcal_bench.evaluation.metrics import rms
 from legcal_bench.estimation.problem.fit import (ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
                                                  whitened_rows)
 from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
@@ -671,7 +672,7 @@ def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, nam
                  claimed=(c["kind"] == "offsets" or c["effects"] == list(selected)),
                  set_aside=set_aside.get(c["name"]),
                  offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))),
-                 offsets_std_rms_rad=float(np.sqrt(np.mean(_std(ev)[:ev.fit.model.n_offsets] ** 2))))
+                 offsets_std_rms_rad=rms(_std(ev)[:ev.fit.model.n_offsets]))
     return out
 
 

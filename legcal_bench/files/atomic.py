@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -16,7 +17,8 @@ def atomic_write(path: str | Path, write: Callable[[Any], None], mode: str = "w"
     """Call `write(fileobj)` on a temporary file beside `path`, then rename it over `path`."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    sweep_beside(path)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=_prefix(path), suffix=".tmp")
     try:
         with os.fdopen(fd, mode) as f:
             write(f)
@@ -29,6 +31,38 @@ def atomic_write(path: str | Path, write: Callable[[Any], None], mode: str = "w"
             os.unlink(tmp)
         raise
     return path
+
+
+def _prefix(path: Path) -> str:
+    """A partial file or folder beside `path`: hidden, named for it and this process."""
+    return f".{path.name}.p{os.getpid()}."
+
+
+def sweep_beside(path: str | Path) -> list[Path]:
+    """Remove the partial files and folders beside `path` (`_prefix`) whose process is
+    gone: a write killed outright (SIGKILL) leaves them; the next write to the same
+    place removes them. A live process's (a concurrent writer's) are left alone."""
+    from legcal_bench.files.scratch import alive
+
+    path = Path(path)
+    pattern = re.compile(rf"^\.{re.escape(path.name)}\.p(\d+)\..*\.(tmp|old)$")
+    removed = []
+    try:
+        entries = list(os.scandir(path.parent))
+    except OSError:
+        return removed
+    for e in entries:
+        m = pattern.match(e.name)
+        if m and not alive(int(m.group(1))):
+            if e.is_dir(follow_symlinks=False):
+                shutil.rmtree(e.path, ignore_errors=True)
+            else:
+                try:
+                    os.unlink(e.path)
+                except OSError:
+                    pass
+            removed.append(Path(e.path))
+    return removed
 
 
 def _umask() -> int:
@@ -50,7 +84,8 @@ def atomic_write_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
     (which must not exist): the folder appears whole or not at all."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    sweep_beside(path)
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=_prefix(path), suffix=".tmp"))
     try:
         write(tmp)
         os.replace(tmp, path)
@@ -72,8 +107,9 @@ def replace_dir(path: str | Path, write: Callable[[Path], None], keep_if: Callab
                           "when it holds an earlier result of the same kind)")
     if not path.exists():
         return atomic_write_dir(path, write)
-    old = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".old"))
-    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"))
+    sweep_beside(path)
+    old = Path(tempfile.mkdtemp(dir=path.parent, prefix=_prefix(path), suffix=".old"))
+    tmp = Path(tempfile.mkdtemp(dir=path.parent, prefix=_prefix(path), suffix=".tmp"))
     try:
         write(tmp)
     except BaseException:

@@ -14,6 +14,7 @@ maps the rest of the path over its elements (`motor_state.q`: each motor's `q`).
 
 from __future__ import annotations
 
+import difflib
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -21,9 +22,10 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
-from legcal_bench.errors import LogImportError, SensorModelError
+from legcal_bench.errors import ConfigError, LogImportError, SensorModelError
+from legcal_bench.inputs import is_finite_number, read_text, shown
 from legcal_bench.robots.legmap import LegMap
-from legcal_bench.sim.sensors import SensorModel
+from legcal_bench.sim.sensors import REALIZED_FIELDS, SensorModel
 
 SCHEMA = "legcal-log-map/1"
 TIME_SOURCES = ("header", "receive")
@@ -111,12 +113,15 @@ class _Where:
     def table(self, d, key: str, known: dict[str, bool]) -> dict:
         """`d` as a mapping with only `known` keys (name -> required)."""
         if not isinstance(d, dict):
-            raise self.err(key, f"must be a mapping of {', '.join(known)}, got {d!r}") if key else LogImportError(
-                f"{self.path}: the mapping file must be a YAML mapping (see docs/log-import.md), got {type(d).__name__}")
-        unknown = sorted(set(d) - set(known))
+            if key:
+                raise self.err(key, f"must be a mapping of {', '.join(known)}, got {shown(d)}")
+            raise LogImportError(f"{self.path}: the mapping file must be a YAML mapping (see docs/log-import.md), "
+                                 f"got {'an empty file' if d is None else type(d).__name__}")
+        unknown = [k for k in d if k not in known]
         if unknown:
-            raise self.err(_join(key, unknown[0]), f"is not a mapping-file field here; known: {sorted(known)} "
-                           "(misspelt?)")
+            close = difflib.get_close_matches(str(unknown[0]), list(known), n=1)
+            raise self.err(_join(key, unknown[0]), "is not a mapping-file field here" + (
+                f" (did you mean {close[0]!r}?)" if close else " (misspelt?)") + f"; known: {sorted(known)}")
         for k, required in known.items():
             if required and d.get(k) is None:
                 raise self.err(_join(key, k), "is required (see docs/log-import.md)")
@@ -124,19 +129,18 @@ class _Where:
 
     def string(self, v, key: str) -> str:
         if not isinstance(v, str) or not v.strip():
-            raise self.err(key, f"must be a non-empty string, got {v!r}")
+            raise self.err(key, f"must be a non-empty string, got {shown(v)}")
         return v
 
     def choice(self, v, key: str, choices) -> str:
-        if v not in choices:
-            raise self.err(key, f"is {v!r}; use one of {list(choices)}")
+        if not isinstance(v, str) or v not in choices:
+            raise self.err(key, f"is {shown(v)}; use one of {list(choices)}")
         return v
 
     def number(self, v, key: str, low: float = 0.0, open_low: bool = True) -> float:
-        ok = isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) and (
-            v > low if open_low else v >= low)
+        ok = is_finite_number(v) and (v > low if open_low else v >= low)
         if not ok:
-            raise self.err(key, f"must be a number {'>' if open_low else '>='} {low:g}, got {v!r}")
+            raise self.err(key, f"must be a number {'>' if open_low else '>='} {low:g}, got {shown(v)}")
         return float(v)
 
     def rotation(self, v, key: str) -> np.ndarray:
@@ -148,14 +152,14 @@ class _Where:
                            "or matrix: [[...], [...], [...]] (rows), rotating the log's frame into the leg map's")
         try:
             a = np.asarray(d.get("rpy_deg", d.get("matrix")), dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):
             a = np.full(1, np.nan)
         if "rpy_deg" in d:
             if a.shape != (3,) or not np.isfinite(a).all():
-                raise self.err(key + ".rpy_deg", f"must be 3 numbers in degrees, got {d['rpy_deg']!r}")
+                raise self.err(key + ".rpy_deg", f"must be 3 numbers in degrees, got {shown(d['rpy_deg'])}")
             return Rotation.from_euler("xyz", np.deg2rad(a)).as_matrix()
         if a.shape != (3, 3) or not np.isfinite(a).all():
-            raise self.err(key + ".matrix", f"must be a 3x3 matrix (3 rows of 3 numbers), got {d['matrix']!r}")
+            raise self.err(key + ".matrix", f"must be a 3x3 matrix (3 rows of 3 numbers), got {shown(d['matrix'])}")
         if np.abs(a @ a.T - np.eye(3)).max() > 1e-6 or np.linalg.det(a) < 0:
             raise self.err(key + ".matrix", "is not a rotation (rows orthonormal to 1e-6, determinant +1): a "
                            "mirrored axis is a sign, not a rotation; fix the matrix")
@@ -174,7 +178,7 @@ def _paths(w: _Where, d: dict, key: str, name: str, default, table: bool, n: int
         if n is None:
             return w.string(v, k)
         if not (isinstance(v, list) and len(v) == n and all(isinstance(c, str) and c for c in v)):
-            raise w.err(k, f"must list {n} column names (a CSV/Parquet log), got {v!r}")
+            raise w.err(k, f"must list {n} column names (a CSV/Parquet log), got {shown(v)}")
         return list(v)
     if v is None:
         raise w.err(k, "is required: the field path into the topic's messages (e.g. 'linear_acceleration')")
@@ -185,23 +189,29 @@ def load_mapping(path: str | Path, legmap: LegMap, table: bool) -> LogMapping:
     """Read and check the mapping file for `legmap`; `table`: the log is CSV/Parquet
     (columns) rather than bags (topics and field paths)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise LogImportError(f"--map {path}: no such file; write one from docs/log-import.md "
                              "(`legcal-bench import --example-map` prints a commented example)")
     try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError) as e:
+        text = read_text("--map", path, "mapping file")  # a folder, unreadable or not UTF-8: named
+    except ConfigError as e:
+        raise LogImportError(str(e)) from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as e:
         raise LogImportError(f"{path}: not a readable YAML file ({e})") from None
+    except RecursionError:
+        raise LogImportError(f"{path}: not a readable YAML file (nested too deeply)") from None
     w = _Where(path)
     d = w.table(data, "", {"format": True, "robot": False, "time_source": False, "time": False,
                            "gap_tolerance_s": False, "clock": False, "sensor_model": True, "motion": False,
                            "messages": False, "joints": True, "imu": True, "ft": False, "contact": False,
                            "detection": False})
     if d["format"] != SCHEMA:
-        raise w.err("format", f"is {d['format']!r}; this reader takes {SCHEMA!r}")
+        raise w.err("format", f"is {shown(d['format'])}; this reader takes {SCHEMA!r}")
     robot = d.get("robot")
     if robot is not None and robot != legmap.name:
-        raise w.err("robot", f"is {robot!r} but --robot is {legmap.name!r}: a log mapped for one robot and "
+        raise w.err("robot", f"is {shown(robot)} but --robot is {legmap.name!r}: a log mapped for one robot and "
                     "calibrated as another gives wrong offsets; pass the right --robot or fix the field")
     time_source = w.choice(d.get("time_source", "header"), "time_source", TIME_SOURCES)
     t = w.table(d.get("time", {}), "time", {"column": False, "unit": False})
@@ -270,7 +280,15 @@ def _sensor_model(w: _Where, v) -> SensorModel | None:
     fields_ = list(SensorModel.__dataclass_fields__)
     if not isinstance(v, dict):
         raise w.err("sensor_model", f"must be the sensors' datasheet values ({', '.join(fields_)}; SI units) or "
-                    f"the word unknown (conservative bounds, said in every result), got {v!r}")
+                    f"the word unknown (conservative bounds, said in every result), got {shown(v)}")
+    for k, x in v.items():
+        if k not in fields_ and k not in REALIZED_FIELDS:  # (realized values: SensorModel.from_dict says why not)
+            close = difflib.get_close_matches(str(k), fields_, n=1)
+            raise w.err(f"sensor_model.{k}", "is not a sensor-model field" + (
+                f" (did you mean {close[0]!r}?)" if close else "") + f"; the fields: {fields_}")
+        if any(isinstance(e, int) and not is_finite_number(e) for e in (x if isinstance(x, list) else [x])):
+            raise w.err(f"sensor_model.{k}", f"is {shown(x)}: a number too large for a float; give the datasheet "
+                        "value in SI units")
     missing = [k for k in fields_ if k not in v]
     if missing:
         raise w.err("sensor_model", f"is missing {missing}: declare each from the datasheet (0 only if the "
@@ -284,7 +302,7 @@ def _sensor_model(w: _Where, v) -> SensorModel | None:
 def _messages(w: _Where, v) -> dict[str, Path]:
     if not isinstance(v, dict):
         raise w.err("messages", f"must map message type names to .msg files, e.g. "
-                    f"'my_robot_msgs/msg/LowState: msgs/LowState.msg', got {v!r}")
+                    f"'my_robot_msgs/msg/LowState: msgs/LowState.msg', got {shown(v)}")
     out = {}
     for name, file in v.items():
         key = f"messages.{name}"
@@ -320,17 +338,18 @@ def _joint_map(w: _Where, v, legmap: LegMap, table: bool, names_field) -> dict[s
         if names_field is None and not table:
             if not isinstance(src, int) or isinstance(src, bool) or src < 0:
                 raise w.err(key + ".source", f"must be an index (>= 0) into the position array: joints.names is "
-                            f"null, so the log has no joint names, got {src!r}")
+                            f"null, so the log has no joint names, got {shown(src)}")
         elif not isinstance(src, str) or not src:
             raise w.err(key + ".source", f"must be the joint's {'column' if table else 'name in the log'}, "
-                        f"got {src!r}")
+                        f"got {shown(src)}")
         if src in seen:
             raise w.err(key + ".source", f"{src!r} is already the source of {seen[src]}: two leg joints from one "
                         "log joint")
         seen[src] = name
         sign = e.get("sign", 1)
         if sign not in (1, -1) or isinstance(sign, bool):
-            raise w.err(key + ".sign", f"must be 1 or -1 (-1: the log's axis is the leg map's reversed), got {sign!r}")
+            raise w.err(key + ".sign", "must be 1 or -1 (-1: the log's axis is the leg map's reversed), got "
+                        f"{shown(sign)}")
         unit = w.choice(e.get("unit", "rad"), key + ".unit", JOINT_UNITS)
         out[name] = JointSource(src, float(sign), JOINT_UNITS[unit])
     return out

@@ -10,7 +10,7 @@ env episode reset with the same seed and stepped with the same postures.
 from __future__ import annotations
 
 import json
-import tempfile
+import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -19,25 +19,42 @@ from typing import NamedTuple
 import numpy as np
 from tqdm import tqdm
 
+from legcal_bench import inputs
 from legcal_bench.data.recording import MANIFEST, Recording, Truth, is_session_dir, truth_path, write_manifest
 from legcal_bench.errors import ConfigError, HoldError, IKError
 from legcal_bench.files.atomic import replace_dir
+from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.geometry.lie import inverse
 from legcal_bench.geometry.poses import posture_poses
 from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, commanded_soles,
                                           feasible_trajectory, fit_stance, load_protocol, posture_bounds,
                                           settled_placement, stances_for)
-from legcal_bench.provenance import RESULTS_VERSION
+from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots.legmap import SIDES
 from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
-from legcal_bench.sim.double_support import DoubleSupportSim
+from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.effects import build_reality, floor_stances
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import paper_note, resolve_offsets
 from legcal_bench.sim.scene import MODES
 from legcal_bench.sim.sensors import sim_sensors
+from legcal_bench.sim.standing import STANDING_CONTROLLERS
+
+# The physics step the collector simulates with (s): each logged frame advances the
+# physics by a whole number of these steps, one at least (`DoubleSupportSim.n_substeps`),
+# so the logging rate is at most 1 / PHYSICS_DT (a faster rate would log frames the
+# physics never stepped between, and run on).
+PHYSICS_DT = 0.001
+MIN_FRAMES = 2  # a segment's frames: two at least (a recording's rate needs two)
+MAX_SEGMENT_S = 3600.0  # an hour of one posture: beyond, a typo (and memory) rather than a protocol
+MAX_HELDOUT = 100
+# The straight-leg phase's knees sit this close to mechanical straight at most: beyond,
+# the leg is bent, not straight (the data check calls a knee 5 deg off straight "bent
+# knees", `legcal_bench.estimation.checks.datacheck`).
+MAX_KNEE_STRAIGHT_ERROR_RAD = math.radians(5.0)
+STANDING = ("auto", *STANDING_CONTROLLERS)  # "auto": "cop" on a contact floor for a robot with ankle F/T sensors
 
 
 @dataclass
@@ -77,6 +94,70 @@ class CollectConfig:
     # The contact floor's parameters changed from the table's (docs/contact-floor.md):
     # "key=value,..." of `legcal_bench.sim.arena.FLOOR_KEYS`, for robustness studies.
     contact_floor: str = ""
+
+    # The command-line option that sets each checked field (`legcal-bench collect`), named
+    # with the field in every refusal.
+    OPTIONS = {"mode": "--mode", "seed": "--seed", "heldout": "--heldout", "rate_hz": "--rate",
+               "stance_s": "--stance-seconds", "heldout_s": "--heldout-seconds", "standing_s": "--standing-seconds",
+               "knee_straight_error_rad": "--knee-error-deg", "period_scale": "--period-scale",
+               "standing": "--standing", "stances": "--stances"}
+
+    def __post_init__(self):
+        check_config(self)
+
+
+def _field(name: str) -> str:
+    option = CollectConfig.OPTIONS.get(name)
+    return f"{name} ({option})" if option else name
+
+
+def check_config(cfg: CollectConfig) -> None:
+    """The collection's values, checked before anything is simulated: the one place for
+    them (the command line's options and the Python API alike); ConfigError naming the
+    field, its option, the value and the fix. Values are checked, never converted (the
+    config's dict is the session set's cache key)."""
+    inputs.choice(_field("mode"), cfg.mode, MODES)
+    if cfg.protocol is None:  # a protocol file's stances replace them (read when collecting)
+        if isinstance(cfg.stances, str) or not cfg.stances:
+            raise ConfigError(f"{_field('stances')} = {cfg.stances!r}: give a list of stance names, e.g. "
+                              "('I', 'II', 'III', 'IV')")
+        check_stance_names(cfg.stances, _field("stances"))
+    inputs.seed(_field("seed"), cfg.seed)
+    inputs.count(_field("heldout"), cfg.heldout, low=0, high=MAX_HELDOUT,
+                 fix=f"held-out sessions to record: 0 to {MAX_HELDOUT}")
+    rate, _, _ = physics_timing(cfg.rate_hz, PHYSICS_DT, _field("rate_hz"), "the physics step")
+    for name, what, allow_zero in (("stance_s", "each stance", False), ("standing_s", "the straight-leg phase", True),
+                                   ("heldout_s", "each held-out session", cfg.heldout == 0)):
+        value = getattr(cfg, name)
+        fix = (f"seconds of {what}" + (" (0: none)" if name == "standing_s" else "")
+               + f", at most {MAX_SEGMENT_S:g}")
+        seconds = (inputs.non_negative if allow_zero else inputs.positive)(_field(name), value, high=MAX_SEGMENT_S,
+                                                                            fix=fix)
+        if seconds > 0 and round(seconds * rate) < MIN_FRAMES:
+            raise ConfigError(f"{_field(name)} = {value!r}: {round(seconds * rate)} frame(s) at {rate:g} Hz; give at "
+                              f"least {MIN_FRAMES / rate:g} s ({MIN_FRAMES} frames) for {what}")
+    knee = inputs.number(_field("knee_straight_error_rad"), cfg.knee_straight_error_rad)
+    if abs(knee) > MAX_KNEE_STRAIGHT_ERROR_RAD:
+        raise ConfigError(
+            f"{_field('knee_straight_error_rad')} = {knee:g} rad ({math.degrees(knee):g} deg): the true knee's "
+            f"distance from mechanical straight in the straight-leg phase must be within "
+            f"{math.degrees(MAX_KNEE_STRAIGHT_ERROR_RAD):g} deg (a few tenths is typical; beyond, the leg is bent, not "
+            "straight)")
+    inputs.number(_field("period_scale"), cfg.period_scale, low=0.1, high=10,
+                  fix="a factor on the posture motion's periods (2: twice as slow)")
+    inputs.choice(_field("standing"), cfg.standing, STANDING)
+    for name in ("jitter_m", "jitter_rad", "heldout_jitter_m", "heldout_jitter_rad"):
+        inputs.non_negative(name, getattr(cfg, name), fix="the placement jitter's largest shift or yaw")
+
+
+def session_id(cfg: CollectConfig, offsets, robot: str) -> str:
+    """The session set's identity, written into every recording (field 'session') and
+    its ground truth (meta 'session'): robot, floor and seed to read, and a hash of
+    the whole config, the offsets injected and the results version, so that a truth
+    file from another session set is told apart (`legcal_bench.data.recording.load_truth`)."""
+    digest = stable_hash({"config": asdict(cfg), "offsets": [float(v) for v in offsets],
+                          "results_version": RESULTS_VERSION})
+    return f"{robot}-{cfg.mode}-seed{cfg.seed}-{digest[:10]}"
 
 
 def stance_catalog(cfg: CollectConfig) -> tuple[dict, tuple[str, ...]]:
@@ -257,18 +338,14 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
     written to a temporary folder that replaces `out_dir` (a previous session set) only
     once every segment has passed the hold check. Raises HoldError if the robot does not
     hold a posture, IKError if a stance does not fit it."""
-    out_dir = Path(out_dir)
-    if cfg.mode not in MODES:
-        raise ConfigError(f"mode {cfg.mode!r}: use one of {MODES}")
-    if not 0.1 <= cfg.period_scale <= 10:
-        raise ConfigError(f"period_scale {cfg.period_scale!r}: use a factor in [0.1, 10] on the posture motion's "
-                          "periods (2: twice as slow)")
+    check_config(cfg)  # again: a config's fields may have been changed since it was made
+    out_dir = inputs.output_folder("out_dir", out_dir)
     legmap = load_robot(cfg.robot, cfg.mjcf)
     sim_legmap = legmap
     if cfg.sim_robot is not None or cfg.sim_model is not None:
         sim_legmap = load_robot(cfg.sim_robot or cfg.robot, cfg.sim_model if cfg.sim_model else
                                 (None if cfg.sim_robot else cfg.mjcf))
-    with tempfile.TemporaryDirectory(prefix="legcal_reality_") as workdir:
+    with scratch_dir("reality") as workdir:
         reality = build_reality(legmap, sim_legmap, cfg.effects, sim_sensors(cfg.sensors), workdir, cfg.seed)
         return _collect(cfg, out_dir, progress, legmap, reality)
 
@@ -287,6 +364,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     sim = DoubleSupportSim(
         legmap, cfg.mode, resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed)),
         reality.sensors, sim_legmap=sim_legmap if sim_legmap is not legmap else None, rate_hz=cfg.rate_hz,
+        physics_dt=PHYSICS_DT,
         knee_straight_error_rad=cfg.knee_straight_error_rad, servo_gains=gains, floor=reality.floor,
         standing_controller=standing_controller(cfg, sim_legmap),
         contact_floor=floor_parameters(cfg.contact_floor) if cfg.contact_floor else None)
@@ -305,7 +383,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     note = paper_note(cfg.offsets, legmap)
     summary = CollectSummary(str(out_dir), asdict(cfg), sim.offsets.tolist(), legmap.joint_names,
                              servo_gains=gains.to_dict() if gains else {}, notes=([note] if note else []) + left_out)
-    session = f"{legmap.name}-{cfg.mode}-seed{cfg.seed}"
+    session = session_id(cfg, sim.offsets, legmap.name)
     t0 = time.perf_counter()
 
     def write(folder: Path) -> None:
@@ -328,7 +406,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
                 imu_true_gyro=tr["imu_true_gyro"],
                 q_enc_clean=(tr["q_motor"] - sim.offsets) / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0)),
-                meta={"mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
+                meta={"session": session, "mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
                       "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),
                       "imu_errors": sim.sensor.errors.to_dict(), "reality": reality.describe(),
@@ -344,7 +422,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 unreachable=int((~tr["posture_reachable"]).sum()), stance_scale=stance_scale,
                 motion_scale=motion_scale, hold=hold.to_dict()))
         bar.close()
-        write_manifest(folder, {"robot": legmap.name, "mode": cfg.mode, "seed": cfg.seed,
+        write_manifest(folder, {"robot": legmap.name, "session": session, "mode": cfg.mode, "seed": cfg.seed,
                                 "sensor_model": sim.sensor.model.to_dict(), "files": files, "config": asdict(cfg),
                                 "results_version": RESULTS_VERSION,
                                 "servo_gains": summary.servo_gains,

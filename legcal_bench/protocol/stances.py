@@ -20,6 +20,7 @@ import pinocchio as pin
 from scipy.spatial import ConvexHull
 
 from legcal_bench.errors import IKError
+from legcal_bench.inputs import is_finite_number, shown
 from legcal_bench.geometry.lie import Exp, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_poses
 from legcal_bench.robots.kinematics import (
@@ -479,6 +480,13 @@ def write_protocol(path, stances: list[Stance], meta: dict | None = None):
     return atomic_write_text(path, yaml.safe_dump(doc, sort_keys=False))
 
 
+# A protocol file's keys (closed: a misspelt key is refused, naming the closest): the
+# stances, and the metadata `legcal-bench design --out` writes beside them.
+PROTOCOL_KEYS = ("format", "version", "stances", "robot", "frames", "stance_s", "made_by", "code", "predicted",
+                 "hold_screen")
+STANCE_KEYS = ("name", "label", *_STANCE_FIELDS, "amplitude", "push")
+
+
 def _amplitudes(d: dict, field: str, default: tuple, high: float, where: str, meaning: str) -> tuple:
     """A protocol entry's `field`: len(default) numbers in [0, high] (default if absent);
     ConfigError naming the field otherwise."""
@@ -486,46 +494,66 @@ def _amplitudes(d: dict, field: str, default: tuple, high: float, where: str, me
 
     v = d.get(field, list(default))
     if (not isinstance(v, list) or len(v) != len(default)
-            or not all(isinstance(a, (int, float)) and not isinstance(a, bool) and 0 <= a <= high for a in v)):
+            or not all(is_finite_number(a) and 0 <= a <= high for a in v)):
         raise ConfigError(f"{where}: field '{field}' must be {len(default)} numbers in [0, {high}] ({meaning}), "
-                          f"got {v!r}")
+                          f"got {shown(v)}")
     return tuple(float(a) for a in v)
 
 
 def load_protocol(path) -> dict[str, Stance]:
     """The stances of a protocol file, by name; ConfigError naming the field and the fix."""
+    from pathlib import Path
+
     import yaml
 
     from legcal_bench.errors import ConfigError
+    from legcal_bench.inputs import known_keys, read_text
 
+    fix = "write one with legcal-bench design --out"
     try:
-        doc = yaml.safe_load(open(path).read())
-    except (OSError, yaml.YAMLError) as e:
-        raise ConfigError(f"protocol {path}: not a readable YAML file ({e})") from None
+        text = read_text("protocol", path, "protocol file")
+    except ConfigError as e:
+        raise ConfigError(f"{e} ({fix})" if not Path(path).exists() else str(e)) from None
+    try:
+        doc = yaml.safe_load(text)
+    except (yaml.YAMLError, RecursionError) as e:
+        reason = e if isinstance(e, yaml.YAMLError) else "nested too deeply"
+        raise ConfigError(f"protocol {path}: not a readable YAML file ({reason})") from None
     if not isinstance(doc, dict) or doc.get("format") != PROTOCOL_FORMAT:
-        raise ConfigError(f"protocol {path}: field 'format' must be {PROTOCOL_FORMAT!r} (write one with "
-                          "legcal-bench design --out)")
+        got = shown(doc.get("format")) if isinstance(doc, dict) else f"{shown(doc)} (the file is not a YAML mapping)"
+        raise ConfigError(f"protocol {path}: field 'format' must be {PROTOCOL_FORMAT!r}, got {got} ({fix})")
+    known_keys(f"protocol {path}", doc, PROTOCOL_KEYS, fix=f"the stances go under 'stances'; {fix}")
+    version = doc.get("version", 1)
+    if isinstance(version, bool) or version != 1:
+        raise ConfigError(f"protocol {path}: field 'version' is {shown(version)}: this legcal-bench reads version 1 "
+                          f"({fix})")
     items = doc.get("stances")
     if not isinstance(items, list) or not items:
-        raise ConfigError(f"protocol {path}: field 'stances' must list at least one stance")
+        raise ConfigError(f"protocol {path}: field 'stances' must list at least one stance, got {shown(items)}")
     out: dict[str, Stance] = {}
     for i, d in enumerate(items):
         where = f"protocol {path}: stances[{i}]"
-        if not isinstance(d, dict) or not isinstance(d.get("name"), str) or not d["name"]:
-            raise ConfigError(f"{where}: needs a 'name' (a string)")
+        if not isinstance(d, dict) or not isinstance(d.get("name"), str) or not d["name"].strip():
+            got = shown(d.get("name")) if isinstance(d, dict) else f"the entry {shown(d)}"
+            raise ConfigError(f"{where}: needs a 'name' (a string), got {got}")
+        known_keys(where, d, STANCE_KEYS, fix="the fields of a stance: see write_protocol")
         name = d["name"]
         if name in ALL_STANCES or name in out:
             raise ConfigError(f"{where}: name {name!r} is taken (built-in stances and earlier entries); rename it")
         vals = {}
         for k in _STANCE_FIELDS:
             v = d.get(k, getattr(Stance, k))
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or abs(v) > 1.0:
-                raise ConfigError(f"{where}: field '{k}' must be a finite number within [-1, 1] (leg lengths or rad), "
-                                  f"got {v!r}")
+            low = 0.0 if k == "depth" else -1.0  # a negative depth would put the pelvis above straight legs
+            if not is_finite_number(v) or not low <= v <= 1.0:
+                raise ConfigError(f"{where}: field '{k}' must be a finite number within [{low:g}, 1] (leg lengths or "
+                                  f"rad), got {shown(v)}")
             vals[k] = float(v)
+        label = d.get("label", "protocol")
+        if not isinstance(label, str):
+            raise ConfigError(f"{where}: field 'label' is {shown(label)}: give a short description (a string)")
         amp = _amplitudes(d, "amplitude", Stance.amplitude, 0.5, where,
                           "x, y, z in leg lengths; roll, pitch, yaw in rad")
         push = _amplitudes(d, "push", Stance.push, MAX_PUSH, where,
                            "the load-varied scissor: fore-aft, lateral and vertical in leg lengths, pitch in rad")
-        out[name] = Stance(name, str(d.get("label", "protocol")), amplitude=amp, push=push, **vals)
+        out[name] = Stance(name, label, amplitude=amp, push=push, **vals)
     return out

@@ -10,7 +10,6 @@ simulated time over wall time). Writes `report.md` and `report.json` to the outp
 from __future__ import annotations
 
 import platform
-import tempfile
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -18,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.files.reports import write_report
+from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.provenance import code_version, describe
 from legcal_bench.robots import available, robot_label
@@ -32,7 +32,7 @@ def run_bench_env(robots: list[str], modes: list[str], out: str | Path, seed: in
             continue
         for mode in modes:
             cfg = CollectConfig(robot=robot, mode=mode, seed=seed)
-            with tempfile.TemporaryDirectory() as tmp:
+            with scratch_dir("benchenv") as tmp:
                 t0 = time.perf_counter()
                 s = collect(cfg, tmp, progress=progress)
                 wall = time.perf_counter() - t0

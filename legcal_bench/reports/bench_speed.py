@@ -37,11 +37,11 @@ import platform
 import statistics
 import subprocess
 import sys
-import tempfile
 from pathlib import Path
 
 from legcal_bench.errors import ConfigError
 from legcal_bench.files.atomic import atomic_write_text
+from legcal_bench.files.scratch import scratch_dir
 
 # The command's parser reads GROUPS and BASELINE from here at every start-up: what only a
 # run needs (provenance reads package metadata) is imported by the run.
@@ -244,7 +244,7 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
     runs = partial.runs
     if partial.done and progress:
         print(f"bench-speed: resuming: {len(partial.done)} probe runs kept in {partial.path}", file=sys.stderr)
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("benchspeed") as tmp:
         tmp = Path(tmp)
         data = tmp / "data"
         if "calibration" in groups:

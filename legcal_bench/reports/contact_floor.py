@@ -24,10 +24,11 @@ one of the floor's parameters and skip the decomposition.
 from __future__ import annotations
 
 import copy
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from legcal_bench.files.scratch import scratch_dir
 
 CASES = ("weld zero", "contact zero", "weld realistic", "contact realistic")
 # The robustness cases: the zero-noise contact floor with one of the table's parameters
@@ -108,7 +109,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     mode, sensors, *rest = case.split()
     floor = rest[0][1:] if rest else ""
     row = {"robot": legmap.name, "robot_spec": robot, "case": case, "mode": mode, "sensors": sensors, "seed": seed}
-    with tempfile.TemporaryDirectory(prefix="legcal_floor_") as work:
+    with scratch_dir("floor") as work:
         folder = Path(work) / "set"
         try:
             collect(CollectConfig(robot=robot, mode=mode, sensors=sensors, seed=seed, heldout=0, contact_floor=floor),

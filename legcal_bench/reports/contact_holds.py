@@ -10,10 +10,11 @@ that fails is counted with the check's reason (sole or pelvis)."""
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from legcal_bench.files.scratch import scratch_dir
 
 CASES = ("cop", "none")  # the standing controller (`CollectConfig.standing`)
 FACTORY_DEG = 1.2
@@ -43,7 +44,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
 
     legmap = load_robot(robot)
     row = {"robot": legmap.name, "robot_spec": robot, "case": case, "seed": seed}
-    with tempfile.TemporaryDirectory(prefix="legcal_holds_") as work:
+    with scratch_dir("holds") as work:
         try:
             summary = collect(CollectConfig(robot=robot, mode="contact", standing=case, seed=seed, heldout=0,
                                             offsets=offsets_for(legmap, seed)), Path(work) / "set", progress=False)
@@ -68,7 +69,7 @@ def build(robots, cases=CASES, seeds: int = 50, workers: int = 2, progress: bool
     from legcal_bench.files.parallel import map_with_progress
     from legcal_bench.reports.robots_check import _design_robots
 
-    with tempfile.TemporaryDirectory(prefix="legcal_holds_robots_") as folder:
+    with scratch_dir("holdsrobots") as folder:
         paths = _design_robots(list(robots), Path(folder))
         jobs = [(r, c, s) for r in paths for c in cases for s in range(seeds)]
         rows = map_with_progress(_case, jobs, workers, "contact-holds", progress)

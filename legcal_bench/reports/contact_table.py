@@ -18,10 +18,11 @@ departure against the true one, the offsets' RMS error with and without the drop
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from legcal_bench.files.scratch import scratch_dir
 
 CASES = ("clean", "wedge 0.3", "wedge 0.05", "contact")
 
@@ -66,7 +67,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
 
     legmap = load_robot(robot)
     mode, effects, stance, side = case_spec(case, seed)
-    with tempfile.TemporaryDirectory(prefix="legcal_contact_") as work:
+    with scratch_dir("contact") as work:
         try:
             collect(CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed, effects=effects),
                     Path(work) / "set", progress=False)

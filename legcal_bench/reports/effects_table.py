@@ -18,11 +18,11 @@ Clean cases (no effect, offsets-only) give the floor.
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.protocol.stances import STANCES
 
 EFFECTS = ("imu_tilt", "leg_length", "encoder_scale", "compliance", "hip_axis")
@@ -72,7 +72,7 @@ def run_case(robot: str, effect: str | None, seed: int, stances: tuple[str, ...]
 
     legmap = load_robot(robot)
     spec = None if effect is None else effect_spec(effect, seed)
-    with tempfile.TemporaryDirectory(prefix="legcal_effects_") as work:
+    with scratch_dir("effects") as work:
         cfg = CollectConfig(robot=robot, mode="weld", sensors="calibrated-imu", seed=seed, stances=tuple(stances),
                             effects=() if spec is None else (spec,))
         collect(cfg, Path(work) / "set", progress=False)

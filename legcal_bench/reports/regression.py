@@ -27,7 +27,6 @@ A change that is meant to move numbers regenerates the fixture on purpose
 from __future__ import annotations
 
 import json
-import tempfile
 from concurrent.futures import Executor
 from pathlib import Path
 
@@ -37,6 +36,7 @@ from legcal_bench.benchmark.plan import plan
 from legcal_bench.benchmark.runner import run
 from legcal_bench.benchmark.suites import G1_EXAMPLE
 from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.provenance import code_version
 from legcal_bench.reports.reproduce import Reproduction
 from legcal_bench.robots import available
@@ -121,7 +121,7 @@ def load_fixture(path: str | Path) -> dict:
 
 def update(path: str | Path, work: Path | None = None, workers: int = 2, progress: bool = True) -> dict:
     """Recompute the fixture with the code at hand and write it (on purpose only)."""
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("regression") as tmp:
         fixture = compute(Path(work or tmp), workers=workers, progress=progress)
     fixture["made_by"] = code_version()
     atomic_write_json(path, fixture)

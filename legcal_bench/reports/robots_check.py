@@ -15,7 +15,6 @@ warning limits, with every warning they raise (false alarms). Writes `report.md`
 
 from __future__ import annotations
 
-import tempfile
 from dataclasses import asdict
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from legcal_bench.errors import LegcalError
 from legcal_bench.estimation.checks.datacheck import LIMITS, data_warnings, statistics
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.reports import write_report
+from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import STANCES, fit_stance
@@ -73,7 +73,7 @@ def _session(robot: str, mode: str, seed: int, folder: Path) -> tuple[dict, floa
 def run_robots_check(out: str | Path, seeds: int = 2, progress: bool = True, extra: list[str] | None = None) -> str:
     rows, skipped = [], []
     provenance = code_version()  # the code this run starts with
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("robotscheck") as tmp:
         tmp = Path(tmp)
         robots: list[tuple[str, str | None]] = [(r, None) for r in BUILTIN]
         robots += [(r, None) for r in (extra or [])]
@@ -310,7 +310,7 @@ def run_data_checks(out: str | Path, robots: list[str] | None = None, seeds: lis
     lengths = SHORT_COLLECT if short else {}
     provenance = code_version()
     rows, defect_rows = [], []
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("robotscheck") as tmp:
         tmp = Path(tmp)
         paths = _design_robots(robots, tmp / "robots")
         n = len(paths) * (len(modes) * len(offsets) * len(seeds) + (len(WEDGES) + 1 if defects else 0))

@@ -109,15 +109,16 @@ def _mjcf_model(path) -> pin.Model:
     """Pinocchio's model of an MJCF. Pinocchio does not follow `<include>` (a scene file
     that includes the robot and its sensors): such a file is read as MuJoCo's dm_control
     reads it, includes resolved, full precision, and that text is given to Pinocchio."""
-    import tempfile
     from pathlib import Path
+
+    from legcal_bench.files.scratch import scratch_dir
 
     path = Path(path)
     if "<include" not in path.read_text():
         return pin.buildModelFromMJCF(str(path))
     from dm_control import mjcf
 
-    with tempfile.TemporaryDirectory() as folder:
+    with scratch_dir("kinematics") as folder:
         flat = Path(folder) / path.name
         flat.write_text(mjcf.from_path(str(path)).to_xml_string())
         return pin.buildModelFromMJCF(str(flat))

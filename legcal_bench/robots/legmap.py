@@ -9,13 +9,15 @@ the MJCF drives torque motors. See docs/leg-map.md for the schema.
 
 from __future__ import annotations
 
+import math
+import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import yaml
 
-from legcal_bench.errors import LegMapError, MissingModelError
+from legcal_bench.errors import ConfigError, LegMapError, MissingModelError
+from legcal_bench.inputs import known_keys, number, read_text, shown
 from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 
 SCHEMA = "legcal-legmap/1"
@@ -23,6 +25,11 @@ SIDES = ("left", "right")
 CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
 # Roles a leg map may declare absent (`absent_roles`): a 5-joint leg without ankle roll.
 ABSENT_ALLOWED = ("ankle_roll",)
+# The leg map's keys (a closed format: a misspelt key is refused, with the closest named).
+TOP_FIELDS = ("schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad", "held_joints_rad",
+              "servo_gains", "absent_roles")
+LEG_FIELDS = ("joints", "sole", "corners", "ft")
+FRAME_FIELDS = ("site", "body", "pos", "rpy")
 
 
 @dataclass(frozen=True)
@@ -161,125 +168,197 @@ def _relpath(target: Path, start: Path) -> str:
     return os.path.relpath(Path(target).resolve(), Path(start).resolve())
 
 
-def _vec(value, where: str, n: int = 3) -> tuple[float, ...]:
+def _known(where: str, d: dict, allowed) -> None:
+    """`inputs.known_keys` as a LegMapError: a misspelt key is named with the closest one."""
     try:
-        arr = np.asarray(value, dtype=float).reshape(-1)
-    except (TypeError, ValueError):
-        raise LegMapError(f"{where}: expected {n} numbers, got {value!r}") from None
-    if arr.size != n or not np.all(np.isfinite(arr)):
-        raise LegMapError(f"{where}: expected {n} finite numbers, got {value!r}")
-    return tuple(float(x) for x in arr)
+        known_keys(where, d, allowed, fix="see docs/leg-map.md")
+    except ConfigError as e:
+        raise LegMapError(str(e)) from None
+
+
+def _name(value, where: str, what: str) -> str:
+    """The name of an element of the model (a non-empty string)."""
+    if not isinstance(value, str) or not value.strip():
+        raise LegMapError(f"{where} is {shown(value)}: give {what} as a non-empty string")
+    return value
+
+
+def _number(value, where: str, fix: str, **limits) -> float:
+    """One finite number (in `limits`, as `inputs.number` takes them); a string is refused
+    (a quoted number in the file is a typo to fix, not a number)."""
+    if isinstance(value, str):
+        raise LegMapError(f"{where} = {shown(value)}: expected a number, not a string ({fix})")
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > 1e308:
+        raise LegMapError(f"{where} = {shown(value)}: expected a finite number ({fix})")
+    try:
+        return float(number(where, value, fix=fix, **limits))
+    except ConfigError as e:
+        raise LegMapError(str(e)) from None
+
+
+def _vec(value, where: str, n: int = 3) -> tuple[float, ...]:
+    """A list of `n` finite numbers."""
+    out = None
+    if isinstance(value, (list, tuple)) and len(value) == n and all(
+            isinstance(x, numbers.Real) and not isinstance(x, bool) for x in value):
+        try:
+            out = tuple(float(x) for x in value)
+        except OverflowError:
+            out = None
+    if out is None or not all(math.isfinite(x) for x in out):
+        raise LegMapError(f"{where}: expected {n} finite numbers{' [x, y, z]' if n == 3 else ''}, got {shown(value)}")
+    return out
 
 
 def _frame(d, where: str) -> FrameSpec:
     if not isinstance(d, dict):
-        raise LegMapError(f"{where}: expected a mapping with 'site' or 'body' (+ 'pos', 'rpy'), got {d!r}")
-    unknown = set(d) - {"site", "body", "pos", "rpy"}
-    if unknown:
-        raise LegMapError(f"{where}: unknown keys {sorted(unknown)}; allowed: site, body, pos, rpy")
+        raise LegMapError(f"{where} is {shown(d)}: expected a mapping {{site: NAME}} or {{body: NAME, pos: [x, y, z], "
+                          "rpy: [r, p, y]}")
+    _known(where, d, FRAME_FIELDS)
     if ("site" in d) == ("body" in d):
         raise LegMapError(f"{where}: give exactly one of 'site: NAME' or 'body: NAME' (with optional pos/rpy)")
     if "site" in d:
         if "pos" in d or "rpy" in d:
             raise LegMapError(f"{where}: 'pos'/'rpy' go with 'body', not with 'site'")
-        return FrameSpec(site=str(d["site"]))
+        return FrameSpec(site=_name(d["site"], f"{where}.site", "the name of a site in the MJCF"))
     return FrameSpec(
-        body=str(d["body"]),
-        pos=_vec(d.get("pos", (0, 0, 0)), f"{where}.pos"),
+        body=_name(d["body"], f"{where}.body", "the name of a body (a link of a URDF)"),
+        pos=_vec(d.get("pos", (0, 0, 0)), f"{where}.pos (metres)"),
         rpy=_vec(d.get("rpy", (0, 0, 0)), f"{where}.rpy (radians)"),
     )
 
 
+def _model_path(data: dict, kind: str, base_dir: Path, where: str) -> Path:
+    """The `mjcf` or `urdf` file, resolved against the leg map's folder; refused if it is
+    not a path, is a folder or does not exist."""
+    what = "MJCF" if kind == "mjcf" else "URDF"
+    value = data[kind]
+    if not isinstance(value, str) or not value.strip() or "\0" in value:
+        raise LegMapError(f"{where}: field '{kind}' is {shown(value)}: give the path of the robot's {what} file, "
+                          "relative to the leg map or absolute")
+    model = Path(value).expanduser()
+    if not model.is_absolute():
+        model = (base_dir / model).resolve()
+    if model.is_dir():
+        raise LegMapError(f"{where}: field '{kind}' points to {model}, which is a folder; give the {what} file itself")
+    if not model.is_file():
+        raise MissingModelError(f"{where}: field '{kind}' points to {model}, which does not exist; "
+                                "give a path relative to the leg map or an absolute path")
+    return model
+
+
+def _leg(ld, side: str, where: str, expected_roles: tuple[str, ...]) -> Leg:
+    lw = f"{where}: legs.{side}"
+    if not isinstance(ld, dict):
+        raise LegMapError(f"{lw} is {shown(ld)}: give the {side} leg as a mapping of joints (its joints from pelvis "
+                          "to foot, each {name: ..., role: ...}), sole and corners (see docs/leg-map.md)")
+    _known(lw, ld, LEG_FIELDS)
+    for key in ("joints", "sole", "corners"):
+        if key not in ld:
+            raise LegMapError(f"{lw}: missing field '{key}'")
+    joints_d = ld["joints"]
+    if not isinstance(joints_d, list):
+        raise LegMapError(f"{lw}.joints is {shown(joints_d)}: list the leg's joints from pelvis to foot, "
+                          f"each as {{name: ..., role: ...}}")
+    if len(joints_d) != len(expected_roles):
+        raise LegMapError(
+            f"{lw}.joints: {len(joints_d)} joints listed; this leg map describes legs of {len(expected_roles)} "
+            f"joints ({', '.join(expected_roles)} from pelvis to foot, the three hip joints in any order)" + (
+                "; a leg without one of these joints (e.g. no ankle roll) declares it with "
+                "absent_roles: [ankle_roll]" if len(joints_d) < len(expected_roles)
+                else "; list only the leg's own joints (hold the others with held_joints_rad)"))
+    joints = []
+    for i, jd in enumerate(joints_d):
+        jw = f"{lw}.joints[{i}]"
+        if not isinstance(jd, dict) or "name" not in jd or "role" not in jd:
+            raise LegMapError(f"{jw}: expected {{name: ..., role: ...}}, got {shown(jd)}")
+        _known(jw, jd, ("name", "role"))
+        role = jd["role"]
+        if not isinstance(role, str) or role not in LEG_ROLES:
+            raise LegMapError(f"{jw}.role: {shown(role)} is not one of {list(LEG_ROLES)}")
+        joints.append(Joint(_name(jd["name"], f"{jw}.name", "the joint's name in the model"), role))
+    roles = [j.role for j in joints]
+    if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != list(expected_roles[3:]):
+        raise LegMapError(
+            f"{lw}.joints: roles must be the three hip joints (any order), then "
+            f"{', '.join(expected_roles[3:])}, from pelvis to foot; got {roles}")
+    corners_d = ld["corners"]
+    if not isinstance(corners_d, dict) or set(corners_d) != set(CORNER_NAMES):
+        extra = sorted(map(str, set(corners_d) - set(CORNER_NAMES))) if isinstance(corners_d, dict) else []
+        raise LegMapError(f"{lw}.corners: give the four sole corners {list(CORNER_NAMES)} "
+                          "as [x, y, z] in the sole frame" + (f" (not {extra})" if extra else "")
+                          + ("" if isinstance(corners_d, dict) else f"; got {shown(corners_d)}"))
+    corners = {k: _vec(corners_d[k], f"{lw}.corners.{k}") for k in CORNER_NAMES}
+    ft = _frame(ld["ft"], f"{lw}.ft") if ld.get("ft") is not None else None
+    return Leg(tuple(joints), _frame(ld["sole"], f"{lw}.sole"), corners, ft)
+
+
+def _optional_mapping(data: dict, key: str, where: str, meaning: str) -> dict:
+    """An optional mapping field (absent or null: empty)."""
+    v = data.get(key)
+    if v is None:
+        return {}
+    if not isinstance(v, dict):
+        raise LegMapError(f"{where}: field '{key}' is {shown(v)}: it must map {meaning}")
+    return v
+
+
 def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegMap:
     """Validate a leg-map mapping; relative paths resolve against `base_dir`."""
-    where = str(source) if source else "leg map"
+    where = f"leg map {source}" if source else "leg map"
     if not isinstance(data, dict):
-        raise LegMapError(f"{where}: expected a YAML mapping at the top level")
+        raise LegMapError(f"{where}: expected a YAML mapping at the top level (schema, name, mjcf, pelvis, imu, "
+                          f"legs: see docs/leg-map.md), got {shown(data)}")
     if data.get("schema") != SCHEMA:
-        raise LegMapError(f"{where}: field 'schema' must be '{SCHEMA}' (got {data.get('schema')!r})")
+        raise LegMapError(f"{where}: field 'schema' must be '{SCHEMA}' (got {shown(data.get('schema'))})")
+    _known(where, data, TOP_FIELDS)
     for key in ("name", "pelvis", "imu", "legs"):
         if key not in data:
             raise LegMapError(f"{where}: missing field '{key}' (see docs/leg-map.md)")
     if ("mjcf" in data) == ("urdf" in data):
         raise LegMapError(f"{where}: give the robot's model in exactly one of the fields 'mjcf' (an MJCF file) "
                           "or 'urdf' (a URDF file)" + (", not both" if "mjcf" in data else ""))
-    unknown = set(data) - {
-        "schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad",
-        "held_joints_rad", "servo_gains", "absent_roles",
-    }
-    if unknown:
-        raise LegMapError(f"{where}: unknown fields {sorted(unknown)} (see docs/leg-map.md)")
+    name = _name(data["name"], f"{where}: field 'name'", "the robot's name (recordings carry it)")
+    pelvis = _name(data["pelvis"], f"{where}: field 'pelvis'", "the name of the floating-base body")
     kind = "mjcf" if "mjcf" in data else "urdf"
-    model = Path(data[kind])
-    if not model.is_absolute():
-        model = (base_dir / model).resolve()
-    if not model.is_file():
-        raise MissingModelError(f"{where}: field '{kind}' points to {model}, which does not exist; "
-                                "give a path relative to the leg map or an absolute path")
+    model = _model_path(data, kind, base_dir, where)
     legs_d = data["legs"]
     if not isinstance(legs_d, dict) or set(legs_d) != set(SIDES):
-        raise LegMapError(f"{where}: field 'legs' must have exactly the keys 'left' and 'right'")
-    absent = data.get("absent_roles", []) or []
-    if not isinstance(absent, list) or not set(absent) <= set(ABSENT_ALLOWED):
-        raise LegMapError(f"{where}: absent_roles: {absent!r}; the roles a leg may lack are {list(ABSENT_ALLOWED)} "
+        raise LegMapError(f"{where}: field 'legs' must have exactly the keys 'left' and 'right', got "
+                          + (f"the keys {list(legs_d)}" if isinstance(legs_d, dict) else shown(legs_d)))
+    absent = data.get("absent_roles") or []
+    if not isinstance(absent, list) or not all(isinstance(r, str) and r in ABSENT_ALLOWED for r in absent):
+        raise LegMapError(f"{where}: absent_roles: {shown(absent)}; the roles a leg may lack are {list(ABSENT_ALLOWED)} "
                           "(a leg needs three hip joints, a knee and an ankle pitch to stand and be calibrated)")
     expected_roles = tuple(r for r in LEG_ROLES if r not in absent)
-    legs = {}
-    for side in SIDES:
-        ld = legs_d[side]
-        lw = f"{where}: legs.{side}"
-        for key in ("joints", "sole", "corners"):
-            if key not in ld:
-                raise LegMapError(f"{lw}: missing field '{key}'")
-        joints_d = ld["joints"]
-        if not isinstance(joints_d, list):
-            raise LegMapError(f"{lw}.joints: list the leg's joints from pelvis to foot, "
-                              f"each as {{name: ..., role: ...}}")
-        if len(joints_d) != len(expected_roles):
-            raise LegMapError(
-                f"{lw}.joints: {len(joints_d)} joints listed; this leg map describes legs of {len(expected_roles)} "
-                f"joints ({', '.join(expected_roles)} from pelvis to foot, the three hip joints in any order)" + (
-                    "; a leg without one of these joints (e.g. no ankle roll) declares it with "
-                    "absent_roles: [ankle_roll]" if len(joints_d) < len(expected_roles)
-                    else "; list only the leg's own joints (hold the others with held_joints_rad)"))
-        joints = []
-        for i, jd in enumerate(joints_d):
-            if not isinstance(jd, dict) or "name" not in jd or "role" not in jd:
-                raise LegMapError(f"{lw}.joints[{i}]: expected {{name: ..., role: ...}}, got {jd!r}")
-            if jd["role"] not in LEG_ROLES:
-                raise LegMapError(f"{lw}.joints[{i}].role: {jd['role']!r} is not one of {list(LEG_ROLES)}")
-            joints.append(Joint(str(jd["name"]), str(jd["role"])))
-        roles = [j.role for j in joints]
-        if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != list(expected_roles[3:]):
-            raise LegMapError(
-                f"{lw}.joints: roles must be the three hip joints (any order), then "
-                f"{', '.join(expected_roles[3:])}, from pelvis to foot; got {roles}")
-        corners_d = ld["corners"]
-        if not isinstance(corners_d, dict) or set(corners_d) != set(CORNER_NAMES):
-            raise LegMapError(f"{lw}.corners: give the four sole corners {list(CORNER_NAMES)} "
-                              "as [x, y, z] in the sole frame")
-        corners = {k: _vec(corners_d[k], f"{lw}.corners.{k}") for k in CORNER_NAMES}
-        ft = _frame(ld["ft"], f"{lw}.ft") if "ft" in ld else None
-        legs[side] = Leg(tuple(joints), _frame(ld["sole"], f"{lw}.sole"), corners, ft)
+    legs = {side: _leg(legs_d[side], side, where, expected_roles) for side in SIDES}
     if legs["left"].hip_order != legs["right"].hip_order:
         raise LegMapError(f"{where}: left and right legs have different hip orderings "
                           f"{legs['left'].hip_order} vs {legs['right'].hip_order}")
     names = [j.name for s in SIDES for j in legs[s].joints]
     if len(set(names)) != len(names):
         raise LegMapError(f"{where}: the {len(names)} leg joint names must be distinct; got {names}")
-    held = data.get("held_joints_rad", {}) or {}
-    if not isinstance(held, dict):
-        raise LegMapError(f"{where}: field 'held_joints_rad' must map joint names to angles in radians")
-    for k, v in held.items():
+    imu = _frame(data["imu"], f"{where}: imu")
+    knee = _number(data.get("knee_straight_rad", 0.0), f"{where}: knee_straight_rad",
+                   "the knee angle of a straight leg, in radians; 0 if the straight leg is at zero")
+    held_d = _optional_mapping(data, "held_joints_rad", where, "joint names to angles in radians")
+    held = {}
+    for k, v in held_d.items():
+        _name(k, f"{where}: held_joints_rad key", "the name of a non-leg joint of the model")
         if k in names:
             raise LegMapError(f"{where}: held_joints_rad.{k} is a leg joint; only non-leg joints are held")
-        _vec([v], f"{where}: held_joints_rad.{k}", 1)
-    gains = data.get("servo_gains", {}) or {}
-    if not isinstance(gains, dict):
-        raise LegMapError(f"{where}: field 'servo_gains' must map leg joint names to [kp, kd]")
-    for k in gains:
+        held[k] = _number(v, f"{where}: held_joints_rad.{k}", "the angle in radians at which the joint is held")
+    gains_d = _optional_mapping(data, "servo_gains", where, "leg joint names to [kp, kd]")
+    gains = {}
+    for k, v in gains_d.items():
         if k not in names:
             raise LegMapError(f"{where}: servo_gains.{k} is not one of the leg joints")
+        kp, kd = _vec(v, f"{where}: servo_gains.{k} ([kp, kd])", 2)
+        if kp <= 0 or kd < 0:
+            raise LegMapError(f"{where}: servo_gains.{k} = {shown(v)}: kp must be > 0 (N m/rad) and kd >= 0 "
+                              "(N m s/rad); give the joint servo's PD gains [kp, kd], or leave the joint out to use "
+                              "the MJCF's or the default gains")
+        gains[k] = (kp, kd)
     urdf = None
     if kind == "urdf":
         sites = [f for f, spec in [("imu", data["imu"])] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES
@@ -292,25 +371,30 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
 
         urdf, model = model, mjcf_of_urdf(model, where)
     return LegMap(
-        name=str(data["name"]),
+        name=name,
         mjcf=model,
         urdf=urdf,
-        pelvis=str(data["pelvis"]),
+        pelvis=pelvis,
         legs=legs,
-        imu=_frame(data["imu"], f"{where}: imu"),
-        knee_straight_rad=float(_vec([data.get("knee_straight_rad", 0.0)], f"{where}: knee_straight_rad", 1)[0]),
-        held_joints_rad={k: float(v) for k, v in held.items()},
-        servo_gains={k: _vec(v, f"{where}: servo_gains.{k} ([kp, kd])", 2) for k, v in gains.items()},
+        imu=imu,
+        knee_straight_rad=knee,
+        held_joints_rad=held,
+        servo_gains=gains,
         source=source,
     )
 
 
 def load_legmap(path: str | Path) -> LegMap:
     path = Path(path).resolve()
-    if not path.is_file():
-        raise LegMapError(f"leg map {path} does not exist")
     try:
-        data = yaml.safe_load(path.read_text())
+        text = read_text("leg map", path, "leg map")
+    except ConfigError as e:
+        raise LegMapError(str(e) + ("; give the path of a leg-map YAML (see docs/leg-map.md)"
+                                    if not path.exists() else "")) from None
+    try:
+        data = yaml.safe_load(text)
     except yaml.YAMLError as e:
-        raise LegMapError(f"{path}: not valid YAML: {e}") from None
+        raise LegMapError(f"leg map {path}: not valid YAML: {e}") from None
+    except RecursionError:
+        raise LegMapError(f"leg map {path}: not valid YAML: nested too deeply") from None
     return parse_legmap(data, path.parent, source=path)

@@ -71,9 +71,9 @@ def _convert(text: str, urdf: Path, where: str) -> str:
         model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
     except ValueError as e:
         raise LegMapError(f"{where}: field 'urdf': MuJoCo could not compile {urdf}: {e}") from None
-    import tempfile
+    from legcal_bench.files.scratch import scratch_dir
 
-    with tempfile.TemporaryDirectory() as tmp:
+    with scratch_dir("urdf") as tmp:
         saved = Path(tmp) / "robot.xml"
         mujoco.mj_saveLastXML(str(saved), model)
         mj = ET.parse(saved).getroot()

@@ -37,10 +37,13 @@ conversion applied to one frame.
 
 from __future__ import annotations
 
+import math
+
 import mujoco
 import numpy as np
 import pinocchio as pin
 
+from legcal_bench import inputs
 from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
@@ -72,6 +75,39 @@ def posture_ik(kin: LegKinematics, left: pin.SE3, right: pin.SE3, postures: np.n
     return (q, postures) if with_postures else q
 
 
+# The MuJoCo time step (s): from 10 us (a stiff model, resolved finely) to 10 ms (past
+# it, the servos and the soles' contacts of these robots go unstable).
+PHYSICS_DT_RANGE = (1e-5, 0.01)
+# The logging (control) rate, Hz: at least one frame a second (`render_fps` is a whole
+# number of frames a second); at most one frame per physics step (`physics_timing`).
+MIN_RATE_HZ = 1.0
+# A logging period is a whole number of physics steps to this relative tolerance (as a
+# policy spec's physics_hz / control_hz, `legcal_bench.policies.spec`).
+WHOLE_STEPS_TOL = 1e-6
+
+def physics_timing(rate_hz, physics_dt, rate_field: str = "rate_hz",
+                   dt_field: str = "physics_dt") -> tuple[float, float, int]:
+    """(rate_hz, physics_dt, physics steps per logging period) checked: each a finite
+    number in its range, and one logging period (1 / rate_hz) a whole, positive number
+    of physics steps, as the simulator steps it (`DoubleSupportSim`: that many MuJoCo
+    steps a frame, the clock advancing 1 / rate_hz) -- else the clock and the physics
+    would disagree. ConfigError naming the arguments and a rate or step that fits."""
+    physics_dt = inputs.number(dt_field, physics_dt, low=PHYSICS_DT_RANGE[0], high=PHYSICS_DT_RANGE[1],
+                               fix="the MuJoCo time step in seconds, e.g. 0.001")
+    rate_hz = inputs.number(rate_field, rate_hz, low=MIN_RATE_HZ, high=1.0 / physics_dt,
+                            fix=f"the logging rate in Hz, e.g. 50; at most {1.0 / physics_dt:g}: one frame per "
+                                f"{1e3 * physics_dt:g} ms physics step")
+    steps = 1.0 / (rate_hz * physics_dt)
+    k = round(steps)
+    if abs(steps - k) > WHOLE_STEPS_TOL * k:
+        up = math.ceil(steps)
+        raise ConfigError(f"{rate_field} = {rate_hz:g} with {dt_field} = {physics_dt:g}: a logging period "
+                          f"({1e3 / rate_hz:g} ms) must be a whole number of physics steps, and is {steps:.6g}; give "
+                          f"physics_dt = 1 / ({up} x rate_hz) = {1.0 / (up * rate_hz):.6g}, or a rate_hz that "
+                          f"1 / physics_dt divides (e.g. {1.0 / (physics_dt * max(1, math.floor(steps))):g})")
+    return rate_hz, physics_dt, k
+
+
 class DoubleSupportSim:
     """One robot in static double support; `reset` places it, `step` moves its pelvis.
 
@@ -95,10 +131,8 @@ class DoubleSupportSim:
         self.true_kin = self.nominal if self.sim_legmap is legmap and not floor else LegKinematics(self.sim_legmap)
         self.offsets = np.asarray(offsets, dtype=float)
         self.sensor = sensor
-        self.rate_hz = float(rate_hz)
+        self.rate_hz, self.physics_dt, self.n_substeps = physics_timing(rate_hz, physics_dt)
         self.dt = 1.0 / self.rate_hz
-        self.physics_dt = float(physics_dt)
-        self.n_substeps = max(1, int(round(self.dt / self.physics_dt)))
         self.knee_straight_error_rad = float(knee_straight_error_rad)
         self.settle_s = float(settle_s)
         self.scene: Scene | None = (build_scene(self.sim_legmap, mode, physics_dt, contact_floor)

@@ -121,7 +121,8 @@ def test_a_robot_that_cannot_hold_is_an_error_in_collect(floppy, tmp_path, capsy
 
 def test_a_robot_that_cannot_hold_is_a_failed_cell_in_bench(floppy, tmp_path, capsys, in_process_cells):
     assert main(["bench", "--suite", "smoke", "--robot", str(floppy), "--calibrators", "zero",
-                 "--out", str(tmp_path / "lb"), "--data", str(tmp_path / "data"), "--quiet"]) == 0
+                 "--out", str(tmp_path / "lb"), "--data", str(tmp_path / "data"), "--quiet"]) == 1
+    assert "cells failed" in capsys.readouterr().err  # the run says how many failed and why, and exits 1
     cells = [json.loads(p.read_text()) for p in (tmp_path / "lb" / "results").rglob("*.json")]
     assert cells and all("did not hold the posture" in c["error"] for c in cells)
     assert "HoldError" in cells[0]["error"] and "collecting floppy_weld_s00" in cells[0]["error"]

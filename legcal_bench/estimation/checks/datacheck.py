@@ -13,6 +13,17 @@ possible); each names the stance, the channel, the size and the likely cause:
                    by more than 5 mm (median distance from its median) within a stance,
                    every exchange of two columns, of the legs, and every reversed joint is
                    tried, and one that makes it 5x steadier is named;
+  standing signs   the straight-leg standing phase holds one posture, so it cannot vary:
+                   judged against the stances instead, at their calibration (the raw
+                   encoders, the estimate, and if neither fits, the framework's fit of the
+                   steady stances alone, which the standing phase cannot spoil), its soles
+                   must lie on one plane (right sole within 5 mm and 1 deg of the left's),
+                   the IMU's vertical must sit on the soles' as in the stances (within
+                   1 deg: the IMU's mount cancels) and its knees must read straight (within
+                   1.5 deg); when they do not, each channel read with the opposite sign in
+                   that recording is tried, and one that fits within those limits and 5x
+                   better is named (a knee's sign flipped there puts twice its reading into
+                   the knee prior);
   lunge sides      a lunge of the built-in protocol must have the foot it names ahead
                    (exchanged legs that leave the inter-foot transform steady);
   IMU axes         the IMU's vertical disagrees with the soles' normals (the posture's up
@@ -35,7 +46,13 @@ sensors, with the inter-foot estimate) and raises no warning; the largest figure
 are identical runs of 7 frames, 1.07 mm dispersion, soles 1.8 mm / 0.46 deg apart, the
 IMU's vertical 0.44 deg off and 0.34 deg moving, 1.40 mm slide, 0.107 deg yaw and
 0.28 deg sole tilt change, all on the G1 in contact mode but the runs
-(reports/robots_check/report.md).
+(reports/robots_check/report.md). The standing signs (issue #42), measured on clean
+sets of the built-ins, the G1 and the variations (mirrored pitch axes, canted hips, kid
+size, five joints) in weld and contact mode, seeds 0-1, at the operating and the
+sensor-weighted estimates: the standing posture's largest figure is at most 0.28 of its
+limit at the estimate that fits it best (the stances-only fit's knees, 0.3 deg from
+straight as simulated), and every channel whose reversal moves the posture (all but
+the hips' yaw) is named when reversed in the standing recording alone.
 """
 
 from __future__ import annotations
@@ -69,6 +86,11 @@ class CheckLimits:
     sole_tilt_rad: float = np.deg2rad(0.5)
     end_fraction: float = 0.15
     max_frames: int = 120  # per stance, for the column and IMU-axis searches
+    # The straight-leg standing phase against the stances' calibration (`standing_signs`).
+    standing_height_m: float = 0.005
+    standing_tilt_rad: float = np.deg2rad(1.0)
+    standing_gravity_rad: float = np.deg2rad(1.0)
+    standing_knee_rad: float = np.deg2rad(1.5)
 
 
 LIMITS = CheckLimits()
@@ -101,6 +123,11 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
     if not msgs:  # legs exchanged on a robot whose stances keep its inter-foot transform steady
         msgs, unsteady = lunge_sides(kin, [r for r in support if r.kind == "stance"], limits)
         out += msgs
+    msgs, flipped = standing_signs(kin, [r for r in support if r.kind == "standing"],
+                                   [r for r in support if r.kind == "stance" and r.name not in unsteady], dq, limits,
+                                   imu=lambda r: "imu" not in frozen[r.name])
+    out += msgs
+    unsteady = unsteady | flipped
     msgs, apart = soles_coplanar(kin, [r for r in support if r.name not in unsteady], dq, limits)
     out += msgs
     stances = [r for r in support if r.kind == "stance" and r.name not in unsteady | apart]
@@ -289,6 +316,144 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
     else:
         msg += ": a foot moved, or the columns, units or leg map do not match the robot"
     return [msg], set(unsteady)
+
+
+def _standing_terms(kin: LegKinematics, Q: np.ndarray, up: np.ndarray | None, ref: np.ndarray | None,
+                    limits: CheckLimits) -> np.ndarray:
+    """(m, k) residuals of the straight-leg standing posture Q (m, n), each over its limit:
+    the right sole's height and tilt (x, y of its normal) in the left sole's frame, the
+    IMU's vertical `up` (pelvis frame) against the soles' mean normal less the same in
+    the stances (`ref`: the IMU's mount and the floor's slope cancel; skipped when None),
+    and each knee from straight."""
+    fk = frame_kinematics(kin, Q)
+    cols = [fk.C[:, 2, 3] / limits.standing_height_m, fk.C[:, 0, 2] / limits.standing_tilt_rad,
+            fk.C[:, 1, 2] / limits.standing_tilt_rad]
+    if up is not None and ref is not None:
+        e = _gravity_vectors(fk, np.broadcast_to(up, (len(Q), 3))) - ref
+        cols += list(e.T / limits.standing_gravity_rad)
+    legmap = kin.legmap
+    knees = [j for j, role in enumerate(legmap.joint_roles) if role == "knee"]
+    cols += [(Q[:, j] - legmap.knee_straight_rad) / limits.standing_knee_rad for j in knees]
+    return np.stack(cols, axis=1)
+
+
+def _gravity_vectors(fk, up: np.ndarray) -> np.ndarray:
+    """(N, 3) n x up: the soles' mean normal against the IMU's vertical, both in the pelvis
+    frame (its norm the angle between them, for small angles)."""
+    n = fk.R_L[:, :, 2] + fk.R_R[:, :, 2]
+    n = n / np.linalg.norm(n, axis=1, keepdims=True)
+    return np.cross(n, up)
+
+
+def _standing_posture(r: Recording, kin: LegKinematics) -> tuple[np.ndarray, np.ndarray]:
+    """(q (n,), up (3,)): a standing recording's one posture, its frames' median encoders,
+    and the IMU's median vertical in the pelvis frame."""
+    ok = _finite(r)
+    up = up_in_base(np.median(r.imu_acc[ok], axis=0)[None], kin.R_BI)[0]
+    return np.median(r.q_enc[ok], axis=0), up
+
+
+def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[Recording], dq: np.ndarray,
+                   limits: CheckLimits = LIMITS, imu=lambda r: True) -> tuple[list[str], set[str]]:
+    """A channel read with the opposite sign in a straight-leg standing recording. It
+    holds one posture, so the inter-foot transform cannot vary there (`swapped_columns`
+    sees nothing); instead the posture must fit the stances' calibration: judged at the
+    raw encoders, at `dq`, and when neither fits at the framework's fit of the steady
+    `stances` alone (`checks.profile`: the standing phase does not enter it, so a
+    knee's flipped sign there cannot spoil it), by `_standing_terms` (the IMU's term with
+    the stances' as reference, for recordings where `imu(r)` and the stances agree on
+    it). A posture that fits none of them is tried with each channel's sign reversed,
+    and a reversal that fits within the limits and `swap_gain` times better than the
+    logged posture is named. Returns the warnings and the recordings named."""
+    if not standing or not stances:
+        return [], set()
+    names = kin.legmap.joint_names
+    n = kin.legmap.n_joints
+    flips = np.ones((n + 1, n))
+    flips[np.arange(1, n + 1), np.arange(n)] = -1.0  # row 0: as logged; row j + 1: joint j reversed
+    estimates = [np.zeros(n), np.asarray(dq, dtype=float)]
+    refs: dict[int, np.ndarray | None] = {}
+
+    def reference(k: int) -> np.ndarray | None:
+        """The stances' median n x up at estimates[k]; None where they disagree (an IMU
+        axis or mount the stances' own check is about)."""
+        if k not in refs:
+            per = []
+            for r in stances:
+                i = _subsample(r, limits.max_frames)
+                fk = frame_kinematics(kin, r.q_enc[i] + estimates[k])
+                per.append(np.median(_gravity_vectors(fk, up_in_base(r.imu_acc[i], kin.R_BI)), axis=0))
+            per = np.array(per)
+            mid = np.median(per, axis=0)
+            spread = np.linalg.norm(per - mid, axis=1).max()
+            refs[k] = mid if spread < 0.5 * limits.standing_gravity_rad else None
+        return refs[k]
+
+    def fits(q: np.ndarray, up: np.ndarray | None, k: int) -> np.ndarray:
+        """Badness (the largest residual over its limit) of each sign pattern at estimates[k]."""
+        terms = _standing_terms(kin, q * flips + estimates[k], up, reference(k) if up is not None else None, limits)
+        return np.abs(terms).max(axis=1)
+
+    out, named = [], set()
+    profiled = False
+    for r in standing:
+        q, up = _standing_posture(r, kin)
+        up = up if imu(r) else None
+        bad = [fits(q, up, k) for k in range(len(estimates))]
+        if min(b[0] for b in bad) <= 1.0:
+            continue
+        if not profiled:
+            profiled = True
+            from legcal_bench.estimation.checks.profile import profiled_offsets
+
+            fitted, _ = profiled_offsets(kin.legmap, stances)
+            if fitted is not None:
+                estimates.append(fitted)
+        bad = [fits(q, up, k) for k in range(len(estimates))]
+        logged = min(b[0] for b in bad)
+        if logged <= 1.0:
+            continue
+        k, j = min(((k, j) for k in range(len(estimates)) for j in range(1, n + 1)), key=lambda kj: bad[kj[0]][kj[1]])
+        best = bad[k][j]
+        if best > 1.0 or best * limits.swap_gain >= logged:
+            continue
+        also = [names[i - 1] for i in range(1, n + 1) if i != j and min(b[i] for b in bad) * limits.swap_gain < logged
+                and min(b[i] for b in bad) <= max(1.0, 2.0 * best)]
+        named.add(r.name)
+        what = _standing_text(kin, q * flips[0] + estimates[k], up, reference(k) if up is not None else None, limits)
+        out.append(f"{r.name}: the straight-leg standing posture does not fit the stances' calibration ({what}; good "
+                   f"data: the soles within {limits.standing_height_m * 1e3:g} mm and "
+                   f"{np.degrees(limits.standing_tilt_rad):g} deg of one plane, the IMU's vertical within "
+                   f"{np.degrees(limits.standing_gravity_rad):g} deg, the knees within "
+                   f"{np.degrees(limits.standing_knee_rad):g} deg of straight): likely {names[j - 1]} reads with the "
+                   "opposite sign in this recording"
+                   + (f" (or {' or '.join(also)}: with {'that' if len(also) == 1 else 'each'} undone it fits "
+                      "within the limits too)" if also else "")
+                   + f" (with it undone the largest figure is {best:.2f} of its limit, as logged {logged:.1f} times "
+                   "it); check the logger's sign for that channel in this recording: a knee prior taken from it "
+                   "would be wrong")
+    return out, named
+
+
+def _standing_text(kin: LegKinematics, q: np.ndarray, up, ref, limits: CheckLimits) -> str:
+    """The figures of a standing posture that exceed their limits, in display units."""
+    fk = frame_kinematics(kin, q[None])
+    C = fk.C[0]
+    parts = []
+    z, tilt = C[2, 3], np.hypot(C[0, 2], C[1, 2])
+    if abs(z) > limits.standing_height_m or tilt > limits.standing_tilt_rad:
+        parts.append(f"the right sole {abs(z) * 1e3:.1f} mm {'above' if z > 0 else 'below'} the left and tilted "
+                     f"{np.degrees(tilt):.2f} deg against it")
+    if up is not None and ref is not None:
+        g = float(np.linalg.norm(_gravity_vectors(fk, up[None])[0] - ref))
+        if g > limits.standing_gravity_rad:
+            parts.append(f"the IMU's vertical {np.degrees(g):.2f} deg from where the stances put it on the soles")
+    legmap = kin.legmap
+    for j, role in enumerate(legmap.joint_roles):
+        if role == "knee" and abs(q[j] - legmap.knee_straight_rad) > limits.standing_knee_rad:
+            parts.append(f"{legmap.joint_names[j]} {np.degrees(q[j] - legmap.knee_straight_rad):+.2f} deg from "
+                         "straight")
+    return ", ".join(parts) or "several figures near their limits"
 
 
 def lunge_sides(kin: LegKinematics, stances: list[Recording],

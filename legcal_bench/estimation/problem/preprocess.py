@@ -63,6 +63,9 @@ class Segment:
     frames: np.ndarray  # indices into the source recording
 
 
+GYRO_UNITS_SHARE = 0.5  # the gyro guard dropping this share of a stance's frames or more: its units are asked about
+
+
 @dataclass
 class FilterReport:
     name: str
@@ -79,9 +82,14 @@ class FilterReport:
     pieces: list[str] = field(default_factory=list)
 
     def text(self) -> str:
-        return (f"{self.raw} raw, {self.non_finite} non-finite, {self.gyro} gyro > guard, {self.accel} accelerometer off g, {self.rotation} rotation "
-                f"residual, {self.translation} translation residual, {self.slip_splits} slip split(s), "
-                f"{self.short_pieces} in short pieces, {self.clustered_out} clustered out, {self.kept} kept")
+        units = ""
+        if self.raw and self.gyro >= GYRO_UNITS_SHARE * self.raw:  # a static stance turning fast throughout
+            units = (f" (the IMU's rate is above the {GYRO_GUARD_RAD_S:g} rad/s guard in most frames of a static "
+                     "stance: is imu_gyro in deg/s? It must be rad/s, numpy.deg2rad)")
+        return (f"{self.raw} raw, {self.non_finite} non-finite, {self.gyro} gyro > guard{units}, {self.accel} "
+                f"accelerometer off g, {self.rotation} rotation residual, {self.translation} translation residual, "
+                f"{self.slip_splits} slip split(s), {self.short_pieces} in short pieces, {self.clustered_out} "
+                f"clustered out, {self.kept} kept")
 
 
 def filter_warnings(reports: list[FilterReport]) -> list[str]:

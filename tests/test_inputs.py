@@ -1,0 +1,91 @@
+"""The door's checks (`legcal_bench.inputs`): each refuses with the field, the value and
+the fix; good values pass through converted."""
+
+import argparse
+import math
+
+import pytest
+
+from legcal_bench import inputs
+from legcal_bench.errors import ConfigError
+
+
+@pytest.mark.parametrize("value, message", [
+    ("abc", "rate = 'abc': expected a number > 0"), (None, "expected a number"), (True, "expected a number"),
+    (math.nan, "expected a finite number"), ("inf", "expected a finite number"), (0, "out of range"),
+    (-50, "out of range, expected a number > 0")])
+def test_a_positive_number_refuses_with_field_and_range(value, message):
+    with pytest.raises(ConfigError, match=message.replace("(", r"\(")):
+        inputs.positive("rate", value)
+
+
+def test_good_values_pass_converted():
+    assert inputs.positive("rate", "50") == 50.0 and inputs.count("workers", 2.0) == 2
+    assert inputs.seed("seed", "7") == 7 and inputs.non_negative("settle_s", 0) == 0.0
+    assert inputs.number("x", 1.0, low=0, high=1) == 1.0
+    with pytest.raises(ConfigError, match=r"x = 1.0: out of range, expected a number in \[0, 1\)"):
+        inputs.number("x", 1.0, low=0, high=1, high_open=True)
+
+
+@pytest.mark.parametrize("value", [-1, 2**32, 1.5, "x", "1e3"])
+def test_a_seed_is_a_32_bit_unsigned_integer(value):
+    with pytest.raises(ConfigError, match="seed = .*non-negative integer"):
+        inputs.seed("seed", value)
+
+
+def test_workers_count_and_choices():
+    for bad in (0, -1):
+        with pytest.raises(ConfigError, match=r"workers = -?\d: out of range, expected an integer >= 1"):
+            inputs.count("workers", bad)
+    with pytest.raises(ConfigError, match=r"mode = 'wled': expected one of weld, kinematic; did you mean 'weld'\?"):
+        inputs.choice("mode", "wled", ["weld", "kinematic"])
+
+
+def test_unknown_keys_are_named_with_the_closest():
+    with pytest.raises(ConfigError, match=r"protocol p.yaml: unknown key 'stnaces' \(did you mean 'stances'\?\)"):
+        inputs.known_keys("protocol p.yaml", {"stances": 1, "stnaces": 2}, ["stances", "settle_s"])
+    inputs.known_keys("p", {"stances": 1}, ["stances"])
+
+
+def test_output_folders_are_checked_before_the_work(tmp_path):
+    assert inputs.output_folder("--out", tmp_path / "a" / "b") == tmp_path / "a" / "b"
+    assert not (tmp_path / "a").exists()  # nothing made
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ConfigError, match="is a file, not a folder"):
+        inputs.output_folder("--out", tmp_path / "f")
+    with pytest.raises(ConfigError, match="is a file, so the folder cannot be made"):
+        inputs.output_folder("--out", tmp_path / "f" / "sub")
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o500)
+    try:
+        import os
+        if os.access(ro, os.W_OK):  # root writes anywhere: the permission cannot refuse
+            pytest.skip("running as root")
+        with pytest.raises(ConfigError, match="is not writable"):
+            inputs.output_folder("--out", ro / "x")
+    finally:
+        ro.chmod(0o700)
+
+
+def test_text_files_are_utf8_and_files(tmp_path):
+    (tmp_path / "ok.yaml").write_text("a: 1\n", encoding="utf-8")
+    assert inputs.read_text("leg map", tmp_path / "ok.yaml") == "a: 1\n"
+    (tmp_path / "bad.yaml").write_bytes(b"a: \xff\xfe\n")
+    with pytest.raises(ConfigError, match=r"not UTF-8 text \(byte 3: b'\\xff'\); save it as UTF-8"):
+        inputs.read_text("leg map", tmp_path / "bad.yaml")
+    with pytest.raises(ConfigError, match="is a folder; give the leg map itself"):
+        inputs.read_text("leg map", tmp_path, "leg map")
+    with pytest.raises(ConfigError, match="no such leg map"):
+        inputs.read_text("leg map", tmp_path / "none.yaml", "leg map")
+
+
+def test_an_argparse_type_refuses_while_the_line_is_read(capsys):
+    p = argparse.ArgumentParser(prog="x")
+    p.add_argument("--seed", type=inputs.arg(inputs.seed), default=0)
+    p.add_argument("--rate", type=inputs.arg(inputs.positive), default=1.0)
+    assert p.parse_args(["--seed", "3", "--rate", "2.5"]).seed == 3
+    with pytest.raises(SystemExit) as e:
+        p.parse_args(["--seed", "-1"])
+    assert e.value.code == 2
+    assert "argument --seed: '-1': out of range, expected an integer in [0, 4294967295]" in capsys.readouterr().err
