@@ -33,7 +33,14 @@ def _start(args: list[str], tmp: Path) -> subprocess.Popen:
            "MKL_NUM_THREADS": "1"}
     return subprocess.Popen([sys.executable, "-c", "import sys; from legcal_bench.cli import main; sys.exit(main())",
                              *args], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
-                            start_new_session=True)
+                            start_new_session=True, preexec_fn=_foreground)
+
+
+def _foreground() -> None:
+    """Ctrl-C's default action, as in a terminal's foreground job: a process inherits an
+    ignored SIGINT (pytest-xdist's workers ignore it, as a shell's background jobs do),
+    and Python then leaves it ignored."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
 
 
 def _wait_for(cond, proc: subprocess.Popen, what: str, within_s: float = 120.0) -> None:
