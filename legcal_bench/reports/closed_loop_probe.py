@@ -31,10 +31,9 @@ import os
 import resource
 import subprocess
 import sys
+import tempfile  # not files.scratch: a probe runs on the baseline's package too
 import time
 from pathlib import Path
-
-from legcal_bench.files.scratch import scratch_dir
 
 THREADS = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "MUJOCO_GL": "egl"}
 CALL_MAIN = "import sys; from legcal_bench.cli import main; sys.exit(main(sys.argv[1:]))"
@@ -61,7 +60,7 @@ def run_cli(args: list[str], env: dict) -> tuple[float, float]:
     """(wall, CPU) seconds of one fresh `legcal_bench.cli.main(args)`, run in an empty
     folder (so the package comes from the path, not the working directory); CPU: user +
     system of that process and its worker processes."""
-    with scratch_dir("probe") as tmp:
+    with tempfile.TemporaryDirectory(prefix="legcal_probe_") as tmp:
         out = os.path.join(tmp, "out")
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t0 = time.perf_counter()

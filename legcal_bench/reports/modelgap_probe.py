@@ -22,9 +22,8 @@ import json
 import os
 import shutil
 import sys
+import tempfile  # not files.scratch: a probe runs on the baseline's package too
 import time
-
-from legcal_bench.files.scratch import scratch_dir
 
 for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_k, "1")
@@ -39,7 +38,7 @@ def once(seeds: int, cases: list[str], extra: list[str], save: str | None = None
     main = importlib.import_module("legcal_bench.cli").main
 
     here = os.getcwd()
-    with scratch_dir("modelgapprobe") as tmp:
+    with tempfile.TemporaryDirectory(prefix="legcal_modelgap_probe_") as tmp:
         if os.path.isdir("examples"):
             os.symlink(os.path.abspath("examples"), os.path.join(tmp, "examples"))
         os.chdir(tmp)

@@ -13,9 +13,8 @@ import argparse
 import json
 import os
 import sys
+import tempfile  # not files.scratch: a probe runs on the baseline's package too
 import time
-
-from legcal_bench.files.scratch import scratch_dir
 
 for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_k, "1")
@@ -83,7 +82,7 @@ def probe(data: str, robot: str, repeats: int, collect_repeats: int, only: str |
     for mode in ("kinematic", "weld", "contact") if only != "calibration" else ():
         rates = []
         for _ in range(collect_repeats):
-            with scratch_dir("speedprobe") as tmp:
+            with tempfile.TemporaryDirectory() as tmp:
                 t0 = time.perf_counter()
                 s = collect(CollectConfig(robot=robot, mode=mode, sensors="realistic"), tmp, progress=False)
                 wall = time.perf_counter() - t0
