@@ -14,12 +14,14 @@ light.
 from __future__ import annotations
 
 import argparse
-import difflib
 import math
 import numbers
 import os
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 from legcal_bench.errors import ConfigError
 
@@ -114,6 +116,8 @@ def seed(field: str, value) -> int:
 
 def choice(field: str, value, options) -> str:
     """One of `options` (strings); a misspelling gets the closest option named."""
+    import difflib  # on the error's path only: the CLI's start-up stays light
+
     options = list(options)
     if value in options:
         return value
@@ -129,6 +133,8 @@ def known_keys(where: str, mapping: dict, allowed, fix: str = "") -> None:
     bad = [k for k in mapping if k not in allowed]
     if not bad:
         return
+    import difflib
+
     parts = []
     for k in bad:
         close = difflib.get_close_matches(str(k), [str(a) for a in allowed], n=1)
