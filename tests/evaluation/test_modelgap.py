@@ -282,8 +282,8 @@ def test_a_tilted_knee_axis_is_one_tilt_column_and_its_offsets_stay_at_the_floor
     g1 = str(Path(__file__).resolve().parents[2] / "examples" / "unitree_g1.legmap.yaml")
     spec, side = outside_spec("knee_axis_tilted", 0, robot="unitree_g1")
     lm = load_robot(g1)
-    collect(CollectConfig(robot=g1, mode="weld", sensors="calibrated-imu", seed=0, heldout=0, effects=(spec,)),
-            tmp_path / "set", progress=False)
+    collect(CollectConfig(robot=g1, mode="weld", sensors="calibrated-imu", seed=0, heldout=0, effects=(spec,),
+                          stance_s=6.0), tmp_path / "set", progress=False)  # half-length stances: 0.0044 deg
     rep = diagnose(lm, load_session(tmp_path / "set", robot=lm))
     assert rep["verdict"] == "unexplained" and rep["recommended"] == "sparse geometry"
     column = f"leg_geometry_{side}.knee_axis_rx"
