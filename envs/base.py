@@ -26,6 +26,7 @@ import mujoco
 import numpy as np
 
 from legcal_bench import inputs
+from legcal_bench.inputs import shown
 from legcal_bench.errors import ConfigError, LegcalError
 from legcal_bench.sim.double_support import PHYSICS_DT_RANGE
 
@@ -90,18 +91,21 @@ class MujocoEnv(gym.Env, ABC):
         servos). Entries outside the space's bounds are the subclass's to handle."""
         shape = self.action_space.shape
         n = int(np.prod(shape))
-        want = f"{n} finite numbers, {self.action_doc}"
+
+        def want() -> str:  # the error's path only: this runs every step
+            return f"{n} finite numbers, {self.action_doc}"
+
         try:
             a = np.asarray(action, dtype=np.float64)
         except (TypeError, ValueError):
-            raise ConfigError(f"action = {_short(action)}: not numbers; give {want}") from None
+            raise ConfigError(f"action = {shown(action)}: not numbers; give {want()}") from None
         if a.size != n:
-            raise ConfigError(f"action: {a.size} values (shape {a.shape}), expected {n} (shape {shape}); give {want}")
+            raise ConfigError(f"action: {a.size} values (shape {a.shape}), expected {n} (shape {shape}); give {want()}")
         a = a.reshape(shape)
-        bad = np.flatnonzero(~np.isfinite(a))
-        if bad.size:
-            raise ConfigError(f"action: entries {bad.tolist()} are not finite ({_short(a.ravel()[bad].tolist())}); "
-                              f"give {want}")
+        if not np.isfinite(a).all():
+            bad = np.flatnonzero(~np.isfinite(a))
+            raise ConfigError(f"action: entries {bad.tolist()} are not finite ({shown(a.ravel()[bad].tolist())}); "
+                              f"give {want()}")
         return a
 
     @property
@@ -130,8 +134,3 @@ class MujocoEnv(gym.Env, ABC):
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
-
-
-def _short(value, limit: int = 80) -> str:
-    text = repr(value)
-    return text if len(text) <= limit else text[:limit - 3] + "..."

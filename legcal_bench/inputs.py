@@ -4,8 +4,7 @@ command line, the Python API and the Gymnasium envs' keyword arguments.
 
 Every check raises `ConfigError` (a `LegcalError`: the CLI prints it in one line and
 exits 2) naming the field, the value given and the fix, before any simulation or
-solve starts. `arg` wraps a check as an argparse `type`, so a bad option is refused
-while the command line is read.
+solve starts. The commands call them first thing (`legcal_bench.cli.robots.door`).
 
 Standard library only: the CLI's parser imports this module, and its start-up stays
 light.
@@ -13,15 +12,10 @@ light.
 
 from __future__ import annotations
 
-import argparse
 import math
 import numbers
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from collections.abc import Callable
 
 from legcal_bench.errors import ConfigError
 
@@ -193,18 +187,3 @@ def read_text(field: str, path, what: str = "file") -> str:
     except UnicodeDecodeError as e:
         raise ConfigError(f"{field} {str(path)!r}: the {what} is not UTF-8 text (byte {e.start}: "
                           f"{raw[e.start:e.start + 1]!r}); save it as UTF-8") from None
-
-
-def arg(check: Callable, *args, **kwargs) -> Callable[[str], object]:
-    """`check(field, value, *args, **kwargs)` as an argparse `type`: its ConfigError
-    becomes argparse's own error (usage, the message, exit 2) while the line is read.
-    The field is the option's name, which argparse puts before the message."""
-
-    def convert(text: str):
-        try:
-            return check("value", text, *args, **kwargs)
-        except ConfigError as e:
-            raise argparse.ArgumentTypeError(str(e).removeprefix("value = ").removeprefix("value ")) from None
-
-    convert.__name__ = getattr(check, "__name__", "value")
-    return convert
