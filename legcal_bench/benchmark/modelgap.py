@@ -247,6 +247,8 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     # cross-validated choice; reports made before #41's candidates have none).
     cands = [{"name": c.get("name"), "kind": c.get("kind"), "effects": list(c.get("effects") or ()),
               "offsets_rms_deg": err(c.get("offsets_rad")), "cv_chi2": c.get("cv_chi2"),
+              "offsets_std_rms_deg": (None if c.get("offsets_std_rms_rad") is None
+                                      else float(np.rad2deg(c["offsets_std_rms_rad"]))),
               "admissible": c.get("admissible"), "recommended": bool(c.get("recommended")),
               "set_aside": c.get("set_aside")} for c in rep.get("candidates") or ()]
     row.update(verdict=rep["verdict"], selected=rep["selected"], poor_fit=rep["poor_fit"],
@@ -259,7 +261,8 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
                                 "after": float(np.rad2deg(rms(after - injected))),
                                 "recommended": float(np.rad2deg(rms(after - injected)))},
                confounded=[c["effect"] for c in rep["confounded"]],
-               candidates=cands, recommended=rep.get("recommended"), generic=_generic(rep.get("generic")))
+               candidates=cands, recommended=rep.get("recommended"), generic=_generic(rep.get("generic")),
+               joints=len(names))
     return row
 
 
@@ -549,13 +552,14 @@ def done_when(rows: list[dict]) -> dict:
     estimate was recommended, and how many recommended offsets are within FLOOR_FACTOR x
     the floor (those beyond listed, with their verdict and summary: the why); each library
     effect's attribution (right / cases). {"robots": {robot: ...}, "totals": ...}."""
-    from legcal_bench.evaluation.modelgap import CONFOUNDED_OFFSETS  # a summary's why, for offsets off the floor
+    from legcal_bench.evaluation.modelgap import CONFOUNDED_OFFSETS, NOT_UNIQUE  # a summary's why, off the floor
 
     out: dict = {}
     tot = {"outside": 0, "selected": 0, "ambiguous": 0, "unexplained": 0, "explained": 0, "scored": 0, "within": 0}
     for robot in dict.fromkeys(r["robot"] for r in rows):
         rr = [r for r in rows if r["robot"] == robot]
-        clean = [_recommended(r) for r in rr if r["kind"] == "clean"]
+        clean_seed = {r["seed"]: _recommended(r) for r in rr if r["kind"] == "clean"}
+        clean = list(clean_seed.values())
         floor = float(np.median(clean)) if clean else None
         bound = None if floor is None else FLOOR_FACTOR * floor
         edits, beyond = [], []
@@ -581,7 +585,10 @@ def done_when(rows: list[dict]) -> dict:
                     beyond.append({"edit": o, "seed": r["seed"], "side": r.get("side"), "verdict": r["verdict"],
                                    "recommended": r.get("recommended"), "offsets_rms_deg": _recommended(r),
                                    "over_floor": _recommended(r) / floor, "summary": r.get("summary", ""),
-                                   "says_why": CONFOUNDED_OFFSETS in r.get("summary", "")})
+                                   "stated_noise_deg": _stated_noise(r), "within_stated_noise": _within_noise(r),
+                                   "clean_same_seed_deg": clean_seed.get(r["seed"]),
+                                   "says_why": (CONFOUNDED_OFFSETS in r.get("summary", "")
+                                                or NOT_UNIQUE in r.get("summary", "") or _within_noise(r))})
         library = {}
         for e in LIBRARY:
             rs = [r for r in rr if r["kind"] == "library" and r["name"] == e]
@@ -640,6 +647,28 @@ def _recommended(r: dict) -> float:
     if o.get("recommended") is not None:
         return o["recommended"]
     return o["after"] if r["selected"] else o["before"]
+
+
+def _stated_noise(r: dict) -> float | None:
+    """The noise (RMS of the offsets' stds, deg) the diagnosis states for the offsets it
+    recommends; None on rows made before it was recorded."""
+    rec = next((c for c in r.get("candidates") or () if c.get("recommended")), None)
+    return None if rec is None else rec.get("offsets_std_rms_deg")
+
+
+NOISE_QUANTILE = 0.99  # an error is within its stated noise below this quantile of the RMS of that noise
+
+
+def _within_noise(r: dict) -> bool:
+    """Whether a row's recommended offsets' error is what their stated noise allows: the
+    RMS of `joints` errors each of the stated std is below sqrt(chi2_q(joints)/joints)
+    times the stated RMS std at NOISE_QUANTILE."""
+    from scipy.stats import chi2
+
+    sd, n = _stated_noise(r), r.get("joints")
+    if not sd or not n:
+        return False
+    return bool(_recommended(r) <= sd * np.sqrt(chi2.ppf(NOISE_QUANTILE, n) / n))
 
 
 def _cell(x, nd: int) -> str:
@@ -719,8 +748,9 @@ def done_when_markdown(dw: dict) -> list[str]:
               f"explained {t['explained']}. No wrong name: {met(t['no_wrong_name'])}.",
               f"- Recommended offsets within {FLOOR_FACTOR:g}x the robot's clean floor: {t['within']}/{t['scored']} "
               f"({share}; asked: {WITHIN_SHARE:.0%}): {met(t['within_met'])}; of the {t['beyond']} beyond, "
-              f"{t['beyond_say_why']} say why (the recommended model's offsets noisier than the offsets-only's, "
-              f"saying the change it adds is partly confounded with the offsets)."]
+              f"{t['beyond_say_why']} say why (the verdict says the change it adds is partly confounded with the "
+              f"offsets, or that the sparse description is not unique, or the error is within the noise it states "
+              f"for the offsets at {NOISE_QUANTILE:.0%})."]
     if t["library_met"] is not None:
         L.append(f"- Library attribution at least {ATTRIBUTION_SHARE:.0%} (19/20) per effect per robot: "
                  f"{met(t['library_met'])}.")
@@ -754,6 +784,9 @@ def done_when_markdown(dw: dict) -> list[str]:
         if beyond:
             L += ["", f"Recommended offsets beyond {FLOOR_FACTOR:g}x the clean floor, and what the diagnosis said:", ""]
             L += [f"- {robot}, {b['edit']} seed {b['seed']} ({b['side']} leg): {b['offsets_rms_deg']:.4f} deg, "
-                  f"{b['over_floor']:.2f}x the floor; recommended {b['recommended'] or '–'}; {b['verdict']}: "
+                  f"{b['over_floor']:.2f}x the floor (its seed's clean case: {_cell(b['clean_same_seed_deg'], 4)} "
+                  f"deg; the noise it states: {_cell(b['stated_noise_deg'], 4)} deg RMS, the error "
+                  f"{'within' if b['within_stated_noise'] else 'beyond'} it); says why: "
+                  f"{'yes' if b['says_why'] else 'no'}; recommended {b['recommended'] or '–'}; {b['verdict']}: "
                   f"{b['summary']}" for robot, b in beyond]
     return L

@@ -47,7 +47,7 @@ from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry, restricted
-from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable,
+from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable, substitutes,
                                                           score_beyond)
 from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
                                                          is_tilt, joint_columns, project_means, time_columns)
@@ -235,6 +235,7 @@ def _std(ev: Evaluated) -> np.ndarray:
 
 NOISIER = 1.2  # a recommended model's offsets noisier than the offsets-only's by more than this: said, with why
 CONFOUNDED_OFFSETS = "partly confounded with the offsets"  # ... in these words (the model-gap suite counts them)
+NOT_UNIQUE = "not unique"  # a sparse description another explains as well, its offsets apart: said in these words
 ADMISSIBLE_SIGMAS = 3.0  # a value outside its effect's bounds by more than this many stds is inadmissible
 
 
@@ -309,9 +310,15 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
     # ln(n_rows) on noise alone about once in seven sets (seen: a lengthened shank's
     # sparse description picking up a second, spurious column, which then out-scored
     # leg_length by BIC in 3 of 40 library sets).
+    # Where a twist and an axis tilt explain the data within AMBIGUOUS_BIC of each
+    # other, the twist is the description (the tilts only name more sparsely what the
+    # twists need several columns for); the tie is reported (`_ties`).
     penalty = np.log(at0.n_rows) + 2 * np.log(full.n - n_q)
-    pick = forward_selection(at0.z, at0.Jw[:, :n_q], at0.Jw[:, n_q:], penalty, GEOMETRY_RTOL)
+    N, C = at0.Jw[:, :n_q], at0.Jw[:, n_q:]
+    twist = np.array([not is_tilt(nm) for nm in full.names[n_q:]])
+    pick = forward_selection(at0.z, N, C, penalty, GEOMETRY_RTOL, prefer=twist, margin=AMBIGUOUS_BIC)
     sparse = fit([n_q + j for j in pick]) if pick else None
+    ties = _ties(ctx, N, C, at0.z, pick, [full.names[n_q + j] for j in range(C.shape[1])])
     outside = None
     if pick and selected:  # the sparse change (first order) beyond the offsets and the selected effects
         A = at0.Jw[:, np.r_[np.arange(n_q), n_q + np.asarray(pick)]]
@@ -343,8 +350,33 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
     return {"ev": ev, "sparse_ev": sparse, "inadmissible": [],
             "sparse_inadmissible": [] if sparse is None else
             inadmissible(ctx, sparse, [e.name for e in sparse.fit.model.effects]),
-            "sparse": [full.names[n_q + j] for j in pick], "outside_selected": outside,
+            "sparse": [full.names[n_q + j] for j in pick], "sparse_ties": ties, "outside_selected": outside,
             "parameters": len(keep), "of": full.n - n_q, "families": None, "_families": families}
+
+
+def _ties(ctx: Context, N: np.ndarray, C: np.ndarray, z: np.ndarray, pick: list[int], names: list[str]) -> list[dict]:
+    """The sparse description's ties that matter: a column standing in for a chosen one
+    (`substitutes`) at a residual within AMBIGUOUS_BIC of the chosen set's, whose
+    offsets differ from the chosen set's by more than MOVE_SIGMAS of their noise in some
+    joint. These data cannot tell the two descriptions apart, nor so their offsets (on
+    the A3-like, the shank twisted about its axis and the knee's axis tilted about the
+    same axis are one change apart from the hip yaw's offset: its axis runs through the
+    knee). Each: the column, the one it stands in for, delta_chi2, the joint whose offset
+    moves most, by how much (rad) and in noise stds; first order."""
+    if not pick:
+        return []
+    A = np.concatenate([N, C[:, pick]], axis=1)
+    sigma = np.sqrt(np.diag(np.linalg.pinv(A.T @ A, hermitian=True)))[:N.shape[1]]
+    joints = list(ctx.prep.kin.legmap.joint_names)
+    out = []
+    for s in substitutes(z, N, C, pick, AMBIGUOUS_BIC, GEOMETRY_RTOL):
+        move = np.abs(s["nuisance_shift"]) / sigma
+        k = int(np.argmax(move))
+        if move[k] > MOVE_SIGMAS:
+            out.append({"column": names[s["column"]], "instead_of": names[s["instead_of"]],
+                        "delta_chi2": float(s["delta_chi2"]), "joint": joints[k],
+                        "offset_apart_rad": float(s["nuisance_shift"][k]), "sigmas": float(move[k])})
+    return out
 
 
 def _gap(c: float, d: int, train: Evaluated) -> dict:
@@ -758,12 +790,21 @@ def _recommended_text(rep: dict) -> str:
            else "one stance: no cross-validation")
     text = f"; recommended offsets: {rec['name']}'s ({why})"
     base = next((c for c in rep["candidates"] if c.get("kind") == "offsets"), None)
-    if rec.get("kind") != "offsets" and base and rec.get("offsets_std_rms_rad") and base.get("offsets_std_rms_rad"):
-        ratio = rec["offsets_std_rms_rad"] / base["offsets_std_rms_rad"]
-        if ratio > NOISIER:
-            text += (f"; their noise {np.rad2deg(rec['offsets_std_rms_rad']):.4f} deg RMS, {ratio:.1f}x the "
-                     f"offsets-only model's: the change it adds is {CONFOUNDED_OFFSETS}, which these data then "
-                     f"determine less well")
+    if rec.get("offsets_std_rms_rad"):
+        text += f", their noise {np.rad2deg(rec['offsets_std_rms_rad']):.4f} deg RMS"
+        if rec.get("kind") != "offsets" and base and base.get("offsets_std_rms_rad"):
+            ratio = rec["offsets_std_rms_rad"] / base["offsets_std_rms_rad"]
+            if ratio > NOISIER:
+                text += (f", {ratio:.1f}x the offsets-only model's: the change it adds is {CONFOUNDED_OFFSETS}, "
+                         f"which these data then determine less well")
+    ties = (rep.get("generic") or {}).get("sparse_ties") or []
+    if rec.get("name") == SPARSE and ties:
+        t = max(ties, key=lambda t: abs(t["offset_apart_rad"]))
+        text += (f"; the sparse description is {NOT_UNIQUE}: {t['column']} instead of {t['instead_of']} explains "
+                 f"these data as well (chi2 {t['delta_chi2']:+.1f}) with the {t['joint']} offset "
+                 f"{np.rad2deg(abs(t['offset_apart_rad'])):.3f} deg away ({t['sigmas']:.0f} noise stds): these data "
+                 f"determine that offset no better than that"
+                 + (f" ({len(ties) - 1} more such tie{'s' * (len(ties) > 2)})" if len(ties) > 1 else ""))
     return text
 
 

@@ -183,13 +183,26 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
     assert "| r | shank_bent (`x:link=<side>_shank,mm=0`, `x:link=<side>_shank,mm=1`, `x:link=<side>_shank,mm=2`) | " \
            "axis offset | 3 | 1 (leg_length 1) | 1 | 1 | 0 | leg_length 1, offsets 1, generic 1 | 1/3; link " \
            "translations 1 |" in md
-    assert "- r, knee_axis_tilted seed 1 (left leg): 0.5000 deg, 25.00x the floor; recommended –; selected: " \
-           "selected because" in md
-    # A beyond case whose summary says its offsets are confounded counts as saying why.
+    assert "- r, knee_axis_tilted seed 1 (left leg): 0.5000 deg, 25.00x the floor (its seed's clean case: " \
+           "0.0200 deg; the noise it states: – deg RMS, the error beyond it); says why: no; recommended –; " \
+           "selected: selected because" in md
+    # A beyond case whose summary says its offsets are confounded counts as saying why;
+    # so does one whose sparse description is not unique.
     rows[5]["summary"] = "unexplained; recommended offsets: generic's; the change it adds is partly confounded " \
                          "with the offsets"
     assert done_when(rows)["totals"]["beyond_say_why"] == 1
     assert "of the 3 beyond, 1 say why" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
+    rows[8]["summary"] = "unexplained; the sparse description is not unique: a instead of b"
+    assert done_when(rows)["totals"]["beyond_say_why"] == 2
+    # ... and one whose error is within the noise it states for its recommended offsets:
+    # 12 joints, the RMS of 12 errors at the stated std below sqrt(chi2_0.99(12) / 12) =
+    # 1.477 times it.
+    rows[5]["summary"] = "unexplained"
+    for sd, says in ((0.031 / 1.47, True), (0.031 / 1.49, False)):
+        rows[5].update(joints=12, candidates=[{"name": "offsets", "recommended": False, "offsets_std_rms_deg": 1.0},
+                                               {"name": "g", "recommended": True, "offsets_std_rms_deg": sd}])
+        b = done_when(rows)["robots"]["r"]["beyond"][0]
+        assert (b["stated_noise_deg"], b["within_stated_noise"], b["says_why"]) == (sd, says, says)
     # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
     rows[-3]["selected"] = ["leg_length"]
     for r_ in rows:

@@ -81,28 +81,69 @@ def identifiable(N: np.ndarray, C: np.ndarray, rtol: float = RANK_RTOL) -> np.nd
 
 
 def forward_selection(z: np.ndarray, N: np.ndarray, C: np.ndarray, penalty: float, rtol: float = RANK_RTOL,
-                      max_columns: int = 12) -> list[int]:
+                      max_columns: int = 12, prefer: np.ndarray | None = None, margin: float = 0.0) -> list[int]:
     """Columns of C added one at a time, each the one that lowers |z|^2 the most beyond
     N and the columns chosen before it, while the drop exceeds `penalty` (per column: the
     BIC's ln(n_rows)); a column whose residue beyond them is below `rtol` of its own
     norm is never chosen (`identifiable`'s sense). To first order about
     the point z and the columns were taken at: the sparsest set of columns that explains
-    what the whole set would, found greedily."""
+    what the whole set would, found greedily. `prefer` (bool per column) breaks ties: a
+    preferred column whose drop is within `margin` of the largest is chosen over it (the
+    tie itself is `substitutes`' to report)."""
     chosen: list[int] = []
-    norms = np.linalg.norm(C, axis=0)
-    floor = max(rtol, RANK_RTOL) * norms
+    floor = max(rtol, RANK_RTOL) * np.linalg.norm(C, axis=0)
     while len(chosen) < max_columns:
-        Q = basis(np.concatenate([N, C[:, chosen]], axis=1))
-        r = z - Q @ (Q.T @ z)
-        Cp = C - Q @ (Q.T @ C)
-        res = np.linalg.norm(Cp, axis=0)
-        ok = (res > floor) & (norms > 0)
-        ok[chosen] = False
+        r, Cp, res, ok = _beyond(z, N, C, chosen, chosen, floor)
         if not ok.any():
             break
         gain = np.where(ok, (Cp.T @ r) ** 2 / np.where(ok, res, 1.0) ** 2, -np.inf)
         j = int(np.argmax(gain))
         if gain[j] <= penalty:
             break
+        if prefer is not None and not prefer[j]:
+            near = np.flatnonzero(prefer & (gain >= gain[j] - margin))
+            if near.size:
+                j = int(near[np.argmax(gain[near])])
         chosen.append(j)
     return chosen
+
+
+def _beyond(z, N, C, kept, excluded, floor):
+    """z and C beyond N and C's `kept` columns: (residual, columns' residues, their norms,
+    which may be chosen: residue above `floor` (per column), not `excluded`)."""
+    Q = basis(np.concatenate([N, C[:, kept]], axis=1))
+    r = z - Q @ (Q.T @ z)
+    Cp = C - Q @ (Q.T @ C)
+    res = np.linalg.norm(Cp, axis=0)
+    ok = res > floor
+    ok[excluded] = False
+    return r, Cp, res, ok
+
+
+def substitutes(z: np.ndarray, N: np.ndarray, C: np.ndarray, chosen: list[int], margin: float,
+                rtol: float = RANK_RTOL) -> list[dict]:
+    """The columns of C that can stand in for one of the `chosen` (the others kept) at a
+    residual within `margin` of theirs: the sparse description is then not unique. Each:
+    {"column", "instead_of", "delta_chi2" (its residual minus the chosen set's, >= 0 when
+    the chosen set is the better), "nuisance_shift" (N's coefficients with it minus with
+    the chosen set, to first order)}. To first order about the point z and C were taken at."""
+    out: list[dict] = []
+    if not chosen:
+        return out
+    floor = max(rtol, RANK_RTOL) * np.linalg.norm(C, axis=0)
+
+    def coefficients(cols) -> tuple[np.ndarray, float]:
+        A = np.concatenate([N, C[:, cols]], axis=1)
+        x, *_ = np.linalg.lstsq(A, z, rcond=None)
+        return x[:N.shape[1]], float(np.sum((z - A @ x) ** 2))
+
+    own, chi2_own = coefficients(chosen)
+    for i, c in enumerate(chosen):
+        rest = [k for k in chosen if k != c]
+        r, Cp, res, ok = _beyond(z, N, C, rest, chosen, floor)
+        chi2 = np.where(ok, r @ r - (Cp.T @ r) ** 2 / np.where(ok, res, 1.0) ** 2, np.inf)
+        for j in np.flatnonzero(chi2 < chi2_own + margin):
+            alt, chi2_alt = coefficients([*rest, int(j)])
+            out.append({"column": int(j), "instead_of": int(c), "delta_chi2": chi2_alt - chi2_own,
+                        "nuisance_shift": alt - own})
+    return out
