@@ -84,6 +84,17 @@ class CalibrationResult:
                 raise CalibrationError(f"{path}: field '{k}' must be a JSON {'object' if want is dict else 'list'}")
         return cls(**d)
 
+    def check_robot(self, legmap: LegMap, source: str = "the result") -> None:
+        """A result used on a robot (scored, a correction, a start) must have been
+        calibrated for it: another robot's offsets, even under the same joint names, are
+        that robot's. CalibrationError naming both robots and `source` (the option and
+        file it came from)."""
+        if self.robot != legmap.name:
+            spec = self.settings.get("robot_spec", self.robot)
+            raise CalibrationError(
+                f"{source}: calibrated for robot {self.robot!r}, but the robot here is {legmap.name!r}: its offsets "
+                f"are {self.robot}'s; give a result calibrated for {legmap.name}, or --robot {spec}")
+
     def offsets_vector(self, joint_names: list[str]) -> np.ndarray:
         missing = [n for n in joint_names if n not in self.offsets_rad]
         if missing:

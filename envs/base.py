@@ -75,6 +75,11 @@ class MujocoEnv(gym.Env, ABC):
             known = [p.name for p in params if p.name != "self" and p.kind not in (p.VAR_KEYWORD, p.VAR_POSITIONAL)]
             inputs.known_keys(f"{cls.__name__} keyword arguments", unknown, known)
 
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        """Gymnasium's reset (the env's random generator seeded by `seed`), the seed
+        checked by the one rule for seeds (`inputs.seed`)."""
+        return super().reset(seed=None if seed is None else inputs.seed("reset seed", seed), options=options)
+
     @staticmethod
     def _reset_options(options: dict | None, known: tuple[str, ...]) -> dict:
         """`options` as a dict; ConfigError naming unknown keys (and the closest known one)."""

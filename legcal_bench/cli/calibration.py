@@ -8,7 +8,7 @@ from functools import partial
 from pathlib import Path
 
 from legcal_bench import inputs
-from legcal_bench.cli.robots import COUNT0, check_result_robot, door, robot_args
+from legcal_bench.cli.robots import COUNT0, door, robot_args
 from legcal_bench.errors import ConfigError
 
 
@@ -141,7 +141,7 @@ def cmd_check(a: argparse.Namespace) -> int:
     result = None
     if a.result:
         result = CalibrationResult.load(a.result)
-        check_result_robot("--result", a.result, result, legmap)
+        result.check_robot(legmap, f"--result {a.result}")
     recs = load_session(a.bags, allow_partial=a.allow_partial, robot=legmap)
     if result is not None:
         dq, offsets_from = result.offsets_vector(legmap.joint_names), a.result
@@ -293,6 +293,7 @@ def cmd_export(a: argparse.Namespace) -> int:
 
     result = CalibrationResult.load(a.result)
     legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot), a.mjcf)
+    result.check_robot(legmap, f"--result {a.result}")
     if a.urdf_out:  # refused before anything is written
         if legmap.urdf is None:
             raise ConfigError(f"--urdf-out: robot {legmap.name} is described by an MJCF ({legmap.mjcf}), not a URDF "
@@ -351,7 +352,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
         cal = get_calibrator(a.calibrator, **parse_options(a.calibrator, a.option))
     legmap = load_robot(a.robot, a.mjcf)
     if res is not None:
-        check_result_robot("--result", a.result, res, legmap)
+        res.check_robot(legmap, f"--result {a.result}")
     if a.walk:
         from legcal_bench.policies.runner import PolicyRunner
 

@@ -9,7 +9,6 @@ from functools import partial
 from pathlib import Path
 
 from legcal_bench import inputs
-from legcal_bench.errors import ConfigError
 
 
 def door(a: argparse.Namespace, **checks) -> None:
@@ -27,17 +26,6 @@ def door(a: argparse.Namespace, **checks) -> None:
 
 # Checks `door` takes, beside inputs.seed, inputs.positive, inputs.count, inputs.output_folder, inputs.output_file.
 COUNT0 = partial(inputs.count, low=0)  # a count where none is meaningful
-
-
-def check_result_robot(option: str, path, result, legmap) -> None:
-    """A calibration result used on a robot (a correction, a start, a reference) must
-    have been calibrated for it: another robot's offsets, even under the same joint
-    names, are that robot's. ConfigError naming both robots."""
-    if result.robot != legmap.name:
-        spec = result.settings.get("robot_spec", result.robot)
-        raise ConfigError(
-            f"{option} {path}: calibrated for robot {result.robot!r}, but the robot here is {legmap.name!r}: its "
-            f"offsets are {result.robot}'s; give a result calibrated for {legmap.name}, or --robot {spec}")
 
 
 def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:

@@ -9,7 +9,7 @@ import json
 from functools import partial
 
 from legcal_bench import inputs
-from legcal_bench.cli.robots import COUNT0, check_result_robot, door, robot_args
+from legcal_bench.cli.robots import COUNT0, door, robot_args
 from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
 
@@ -23,7 +23,7 @@ def _correction(path, legmap):
     from legcal_bench.calibrators.base import CalibrationResult
 
     result = CalibrationResult.load(path)
-    check_result_robot("--correction", path, result, legmap)
+    result.check_robot(legmap, f"--correction {path}")
     return result.offsets_vector(legmap.joint_names)
 
 

@@ -27,6 +27,7 @@ import numpy as np
 from legcal_bench.calibrators.base import CalibrationResult
 from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import CalibrationError, RecordingError
+from legcal_bench.estimation.checks.datacheck import heldout_signs
 from legcal_bench.estimation.checks.motion import resolve_motion
 from legcal_bench.estimation.imu.imu_motion import compensate
 from legcal_bench.estimation.imu.levelling import up_in_base
@@ -102,11 +103,10 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
     kin = LegKinematics(legmap)
     names = legmap.joint_names
     dq = result.offsets_vector(names)
-    if result.robot != legmap.name:
-        raise CalibrationError(f"the result was calibrated for robot {result.robot!r} but the leg map is "
-                               f"{legmap.name!r}: score it with the leg map it was calibrated with (--robot)")
+    result.check_robot(legmap)
     paths = list_segments(bags, allow_partial)
-    check_against_robot([load_recording(p, names) for p in paths], legmap)
+    recordings = [load_recording(p, names) for p in paths]
+    check_against_robot(recordings, legmap)
     truths = _truths(paths, names)
     out: dict = {"calibrator": result.calibrator, "robot": legmap.name, "settings": result.settings}
     if not truths:
@@ -133,13 +133,13 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
                 "rms_error_deg": float(np.rad2deg(rms(rel))), "max_error_deg": float(np.rad2deg(np.abs(rel).max())),
                 "pitch_sum_error_deg": {k: float(np.rad2deg(v)) for k, v in pitch_sums(rel, signs).items()}}
     R_BI = kin.R_BI
-    held = [p for p in paths if load_recording(p, names).kind == "heldout"]
+    held = [(p, r) for p, r in zip(paths, recordings) if r.kind == "heldout"]
     if held:
         h0, h1, n0, n1, ht0, ht1, nt0, nt1 = ([] for _ in range(8))
-        motion_warnings: list[str] = []
-        for p in held:
-            (rec,), found = resolve_motion(kin, [load_recording(p, names)])
-            motion_warnings += found
+        heldout_warnings: list[str] = heldout_signs(kin, recordings, dq)  # a reversed sign scores as a poor fit
+        for p, r in held:
+            (rec,), found = resolve_motion(kin, [r])
+            heldout_warnings += found
             acc = compensate(kin, rec.time, rec.q_enc, rec.imu_acc) if rec.motion == "continuous" else rec.imu_acc
             up = up_in_base(acc, R_BI)
             for store_h, store_n, corr in ((h0, n0, 0.0), (h1, n1, dq)):
@@ -162,8 +162,8 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
                                     "after": float(np.rad2deg(rms(cat(n1))))},
             "foot_height_residuals_mm": {"before": (cat(h0) * 1e3).tolist(), "after": (cat(h1) * 1e3).tolist()},
         }
-        if motion_warnings:
-            out["heldout"]["warnings"] = motion_warnings
+        if heldout_warnings:
+            out["heldout"]["warnings"] = heldout_warnings
         if ht0:
             out["heldout"]["foot_height_rms_true_mm"] = {"before": rms(cat(ht0)) * 1e3, "after": rms(cat(ht1)) * 1e3}
             out["heldout"]["sole_normal_rms_true_deg"] = {"before": float(np.rad2deg(rms(cat(nt0)))),

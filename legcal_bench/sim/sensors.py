@@ -50,7 +50,7 @@ def _numbers(cls, d: dict, what: str) -> dict:
                                                                                    for x in v)):
                 raise ValueError
             a = np.asarray(v, dtype=float)
-        except (TypeError, ValueError):
+        except (TypeError, ValueError, OverflowError):  # OverflowError: an integer beyond any float
             a = None
         if vector and (a is None or a.shape != (3,) or not np.isfinite(a).all()):
             raise SensorModelError(f"{what}: field '{k}' must be 3 finite numbers [x, y, z], got {v!r}")

@@ -208,6 +208,8 @@ CASES = [
     (["excite", "--frames", "0"], "--frames", []),
     (["export", "--result", "{root}/ryp_result.json", "--out", "{root}/adir"], "--out", []),
     (["export", "--result", "{root}/ryp_result.json", "--mjcf-out", "{root}/afile/m"], "--mjcf-out", []),
+    (["export", "--result", "{root}/ryp_result.json", "--robot", "a3", "--out", "{root}/o.yaml"], "--result",
+     ["'pair_ryp'", "'a3'"]),
     (["simulate-log", "--seed", "-1", *OUT], "--seed", []),
     (["simulate-log", "--sensors", "bogus", *OUT], "--sensors", []),
     (["import", "--out", "{root}/afile/s"], "--out", []),

@@ -84,7 +84,7 @@ def test_an_explicit_zero_weight_is_kept():
     ("encoder_noise_std", "a"), ("encoder_noise_std", [1, 2]), ("encoder_noise_std", -1e-3),
     ("encoder_noise_std", True), ("gyro_noise_std", float("nan")), ("accel_bias_bound", "abc"),
     ("accel_bias_bound", [1, 2]), ("accel_bias_bound", float("inf")), ("imu_mount_bound", None),
-    ("imu_mount_bound", -1e-3),
+    ("imu_mount_bound", -1e-3), ("gyro_noise_std", 10**400), ("accel_bias_bound", -10**400),  # beyond any float
 ])
 def test_sensor_model_fields_are_checked(field, value):
     with pytest.raises(SensorModelError, match=f"field '{field}'"):
@@ -330,7 +330,7 @@ def a3_result(session, tmp_path_factory) -> Path:
     (None, ["--result", "{tmp}/none.json"], r"none.json: not a readable result JSON"),
     (lambda tmp, res: (tmp / "bad.json").write_text("{"), ["--result", "{tmp}/bad.json"],
      r"bad.json: not a readable result JSON"),
-    (None, ["--robot", "pair_pry"], r"calibrated for robot 'a3' but the leg map is 'pair_pry'"),
+    (None, ["--robot", "pair_pry"], r"calibrated for robot 'a3', but the robot here is 'pair_pry'"),
     (lambda tmp, res: (tmp / "pp.json").write_text(json.dumps({**json.loads(res.read_text()), "robot": "pair_pry"})),
      ["--result", "{tmp}/pp.json"], r"field 'robot' is 'a3' but the leg map is 'pair_pry'"),
 ])

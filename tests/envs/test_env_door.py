@@ -163,6 +163,12 @@ def test_static_env_refuses_bad_reset_options(options, field):
     _refused(lambda: env.reset(seed=0, options=options), field)
 
 
+@pytest.mark.parametrize("seed", [-1, 2**32, 1.5, "x"])
+def test_both_envs_refuse_a_bad_reset_seed_by_the_one_rule(walking_env, seed):
+    _refused(lambda: StaticDoubleSupportEnv(**STATIC).reset(seed=seed), "reset seed")
+    _refused(lambda: walking_env.reset(seed=seed), "reset seed")
+
+
 @pytest.mark.parametrize("options, field", [({"offsets": "papr"}, "offsets"), ({"correction": [0.1]}, "correction"),
                                             ({"corection": None}, "correction")])
 def test_walking_env_refuses_bad_reset_options(walking_env, options, field):

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from legcal_bench.calibrators.registry import get_calibrator
-from legcal_bench.data.recording import load_session
+from legcal_bench.data.recording import load_session, training
 from legcal_bench.estimation.checks.datacheck import data_warnings, standing_signs
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
@@ -44,10 +44,10 @@ def sets(tmp_path_factory):
         if robot not in cache:
             path = str(write_robot(MIRRORED, robots)) if robot == MIRRORED.name else robot
             out = tmp_path_factory.mktemp(MIRRORED.name if robot == MIRRORED.name else "set") / "set"
-            collect(CollectConfig(robot=path, heldout=0), out, progress=False)
+            collect(CollectConfig(robot=path, heldout=1), out, progress=False)
             lm = load_robot(path)
             recs = load_session(out, robot=lm)
-            assert [r.kind for r in recs] == ["standing"] + ["stance"] * 4
+            assert [r.kind for r in recs] == ["standing"] + ["stance"] * 4 + ["heldout"]
             cache[robot] = (lm, recs, out, np.load(out / "stance_I.truth.npz")["offsets"])
         return cache[robot]
     return get
@@ -55,12 +55,12 @@ def sets(tmp_path_factory):
 
 def _calibrate(lm, recs, calibrator):
     name = "interfoot" if calibrator == "operating" else calibrator
-    return get_calibrator(name, **CALIBRATORS[calibrator]).calibrate(lm, recs)
+    return get_calibrator(name, **CALIBRATORS[calibrator]).calibrate(lm, training(recs))
 
 
-def _flipped(lm, recs, joint):
+def _flipped(lm, recs, joint, kind="standing"):
     out = copy.deepcopy(recs)
-    out[0].q_enc[:, lm.joint_names.index(joint)] *= -1  # the standing recording only
+    next(r for r in out if r.kind == kind).q_enc[:, lm.joint_names.index(joint)] *= -1  # that recording only
     return out
 
 
@@ -123,3 +123,28 @@ def test_a_flip_the_standing_posture_cannot_show_is_not_named(sets):
     res = _calibrate(lm, recs, "operating")
     assert data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names)) == []
     assert np.degrees(np.abs(res.offsets_vector(lm.joint_names) - truth)).max() < 0.5
+
+
+@pytest.mark.parametrize("robot, joint", [("a3", "right_ankle_pitch_joint"), ("a3", "left_hip_pitch_joint"),
+                                          (MIRRORED.name, "right_hip_pitch_joint")])
+def test_a_channel_flipped_in_a_held_out_session_is_named_by_check_and_score(sets, tmp_path, robot, joint):
+    """Held-out sessions score the calibration by their foot height; one read with a
+    reversed sign would score the reversal as a poor calibration, silently. Its posture
+    (knees free) must fit the stances' calibration as the standing phase's does. (A bent knee
+    read reversed leaves its joint limits: the recording is refused on loading.)"""
+    from legcal_bench.evaluation.scoring import score
+
+    lm, clean, out, _ = sets(robot)
+    recs = _flipped(lm, clean, joint, "heldout")
+    res = _calibrate(lm, recs, "interfoot")
+    found = data_warnings(LegKinematics(lm), recs, res.offsets_vector(lm.joint_names))
+    assert len(found) == 1, found
+    assert re.match(rf"heldout_1: the held-out posture does not fit the stances' calibration \(.*\): likely {joint} "
+                    "reads with the opposite sign in this recording .*its held-out foot height would score the "
+                    "reversed sign, not the calibration$", found[0]), found
+    assert "knees within" not in found[0]
+    folder = tmp_path / "set"
+    shutil.copytree(out, folder)
+    recs[-1].save(folder / "heldout_1.npz")
+    assert found[0] in score(str(folder), res, lm)["heldout"]["warnings"]
+    assert "warnings" not in score(str(out), res, lm)["heldout"]  # the clean set: no alarm

@@ -127,6 +127,8 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
                                    [r for r in support if r.kind == "stance" and r.name not in unsteady], dq, limits,
                                    imu=lambda r: "imu" not in frozen[r.name])
     out += msgs
+    out += heldout_signs(kin, recordings, dq, limits, frozen,
+                         [r for r in support if r.kind == "stance" and r.name not in unsteady])
     unsteady = unsteady | flipped
     msgs, apart = soles_coplanar(kin, [r for r in support if r.name not in unsteady], dq, limits)
     out += msgs
@@ -136,6 +138,28 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
     for r in stances:
         out += stance_changes(kin, r, dq, limits, tilt=r.name not in tilted and "imu" not in frozen[r.name])
     return out
+
+
+def heldout_signs(kin: LegKinematics, recordings: list[Recording], dq: np.ndarray, limits: CheckLimits = LIMITS,
+                  frozen: dict | None = None, stances: list[Recording] | None = None) -> list[str]:
+    """A channel read with the opposite sign in a held-out session (`standing_signs` on
+    its posture, knees free): its foot height would score the reversed sign, not the
+    calibration. Judged against `stances` (default: the recordings' stances); `frozen`:
+    each recording's frozen channel kinds (`frozen_channels`), found when not given."""
+    names = kin.legmap.joint_names
+    held = [r for r in recordings if r.kind == "heldout"]
+    if not held:
+        return []
+    if frozen is None:
+        frozen = {r.name: frozen_channels(r, names, limits)[1] for r in recordings}
+
+    def usable(r: Recording) -> bool:
+        return _finite(r).sum() >= 10 and "encoder" not in frozen[r.name]
+
+    if stances is None:
+        stances = [r for r in recordings if r.kind == "stance" and usable(r)]
+    return standing_signs(kin, [r for r in held if usable(r)], stances, dq, limits,
+                          imu=lambda r: "imu" not in frozen[r.name], straight=False)[0]
 
 
 def _finite(r: Recording) -> np.ndarray:
@@ -319,12 +343,12 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
 
 
 def _standing_terms(kin: LegKinematics, Q: np.ndarray, up: np.ndarray | None, ref: np.ndarray | None,
-                    limits: CheckLimits) -> np.ndarray:
-    """(m, k) residuals of the straight-leg standing posture Q (m, n), each over its limit:
-    the right sole's height and tilt (x, y of its normal) in the left sole's frame, the
-    IMU's vertical `up` (pelvis frame) against the soles' mean normal less the same in
-    the stances (`ref`: the IMU's mount and the floor's slope cancel; skipped when None),
-    and each knee from straight."""
+                    limits: CheckLimits, straight: bool = True) -> np.ndarray:
+    """(m, k) residuals of the double-support posture Q (m, n) on flat ground, each over
+    its limit: the right sole's height and tilt (x, y of its normal) in the left sole's
+    frame, the IMU's vertical `up` (pelvis frame) against the soles' mean normal less the
+    same in the stances (`ref`: the IMU's mount and the floor's slope cancel; skipped
+    when None), and, for straight-leg standing (`straight`), each knee from straight."""
     fk = frame_kinematics(kin, Q)
     cols = [fk.C[:, 2, 3] / limits.standing_height_m, fk.C[:, 0, 2] / limits.standing_tilt_rad,
             fk.C[:, 1, 2] / limits.standing_tilt_rad]
@@ -332,7 +356,7 @@ def _standing_terms(kin: LegKinematics, Q: np.ndarray, up: np.ndarray | None, re
         e = _gravity_vectors(fk, np.broadcast_to(up, (len(Q), 3))) - ref
         cols += list(e.T / limits.standing_gravity_rad)
     legmap = kin.legmap
-    knees = [j for j, role in enumerate(legmap.joint_roles) if role == "knee"]
+    knees = [j for j, role in enumerate(legmap.joint_roles) if role == "knee" and straight]
     cols += [(Q[:, j] - legmap.knee_straight_rad) / limits.standing_knee_rad for j in knees]
     return np.stack(cols, axis=1)
 
@@ -354,9 +378,11 @@ def _standing_posture(r: Recording, kin: LegKinematics) -> tuple[np.ndarray, np.
 
 
 def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[Recording], dq: np.ndarray,
-                   limits: CheckLimits = LIMITS, imu=lambda r: True) -> tuple[list[str], set[str]]:
-    """A channel read with the opposite sign in a straight-leg standing recording. It
-    holds one posture, so the inter-foot transform cannot vary there (`swapped_columns`
+                   limits: CheckLimits = LIMITS, imu=lambda r: True,
+                   straight: bool = True) -> tuple[list[str], set[str]]:
+    """A channel read with the opposite sign in a straight-leg standing recording, or
+    (`straight` False) in a held-out session, each a static double-support posture on
+    flat ground whose knees need not be straight. It holds one posture, so the inter-foot transform cannot vary there (`swapped_columns`
     sees nothing); instead the posture must fit the stances' calibration: judged at the
     raw encoders, at `dq`, and when neither fits at the framework's fit of the steady
     `stances` alone (`checks.profile`: the standing phase does not enter it, so a
@@ -391,7 +417,8 @@ def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[
 
     def fits(q: np.ndarray, up: np.ndarray | None, k: int) -> np.ndarray:
         """Badness (the largest residual over its limit) of each sign pattern at estimates[k]."""
-        terms = _standing_terms(kin, q * flips + estimates[k], up, reference(k) if up is not None else None, limits)
+        terms = _standing_terms(kin, q * flips + estimates[k], up, reference(k) if up is not None else None, limits,
+                                straight)
         return np.abs(terms).max(axis=1)
 
     out, named = [], set()
@@ -420,22 +447,24 @@ def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[
         also = [names[i - 1] for i in range(1, n + 1) if i != j and min(b[i] for b in bad) * limits.swap_gain < logged
                 and min(b[i] for b in bad) <= max(1.0, 2.0 * best)]
         named.add(r.name)
-        what = _standing_text(kin, q * flips[0] + estimates[k], up, reference(k) if up is not None else None, limits)
-        out.append(f"{r.name}: the straight-leg standing posture does not fit the stances' calibration ({what}; good "
-                   f"data: the soles within {limits.standing_height_m * 1e3:g} mm and "
-                   f"{np.degrees(limits.standing_tilt_rad):g} deg of one plane, the IMU's vertical within "
-                   f"{np.degrees(limits.standing_gravity_rad):g} deg, the knees within "
-                   f"{np.degrees(limits.standing_knee_rad):g} deg of straight): likely {names[j - 1]} reads with the "
+        what = _standing_text(kin, q * flips[0] + estimates[k], up, reference(k) if up is not None else None, limits,
+                              straight)
+        knees = f", the knees within {np.degrees(limits.standing_knee_rad):g} deg of straight" if straight else ""
+        out.append(f"{r.name}: the {'straight-leg standing' if straight else 'held-out'} posture does not fit the "
+                   f"stances' calibration ({what}; good data: the soles within {limits.standing_height_m * 1e3:g} mm "
+                   f"and {np.degrees(limits.standing_tilt_rad):g} deg of one plane, the IMU's vertical within "
+                   f"{np.degrees(limits.standing_gravity_rad):g} deg{knees}): likely {names[j - 1]} reads with the "
                    "opposite sign in this recording"
                    + (f" (or {' or '.join(also)}: with {'that' if len(also) == 1 else 'each'} undone it fits "
                       "within the limits too)" if also else "")
                    + f" (with it undone the largest figure is {best:.2f} of its limit, as logged {logged:.1f} times "
-                   "it); check the logger's sign for that channel in this recording: a knee prior taken from it "
-                   "would be wrong")
+                   "it); check the logger's sign for that channel in this recording: "
+                   + ("a knee prior taken from it would be wrong" if straight else
+                      "its held-out foot height would score the reversed sign, not the calibration"))
     return out, named
 
 
-def _standing_text(kin: LegKinematics, q: np.ndarray, up, ref, limits: CheckLimits) -> str:
+def _standing_text(kin: LegKinematics, q: np.ndarray, up, ref, limits: CheckLimits, straight: bool = True) -> str:
     """The figures of a standing posture that exceed their limits, in display units."""
     fk = frame_kinematics(kin, q[None])
     C = fk.C[0]
@@ -450,7 +479,7 @@ def _standing_text(kin: LegKinematics, q: np.ndarray, up, ref, limits: CheckLimi
             parts.append(f"the IMU's vertical {np.degrees(g):.2f} deg from where the stances put it on the soles")
     legmap = kin.legmap
     for j, role in enumerate(legmap.joint_roles):
-        if role == "knee" and abs(q[j] - legmap.knee_straight_rad) > limits.standing_knee_rad:
+        if straight and role == "knee" and abs(q[j] - legmap.knee_straight_rad) > limits.standing_knee_rad:
             parts.append(f"{legmap.joint_names[j]} {np.degrees(q[j] - legmap.knee_straight_rad):+.2f} deg from "
                          "straight")
     return ", ".join(parts) or "several figures near their limits"
