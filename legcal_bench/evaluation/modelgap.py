@@ -177,7 +177,9 @@ def polish(ctx: Context, fit, box: bool = False) -> Evaluated:
     ev = evaluate(ctx, replace(fit, x=x.copy()), segs, keep_frames=True, at_step=False)
     lam = 0.0  # the damping, relative to each column's own curvature
     for _ in range(POLISH_MAX_STEPS):
-        if ev.chi2 - chi2_after(ev.z, ev.Jw) <= POLISH_TOL:
+        # The chi-square after the Gauss-Newton step `evaluate` solved (its residual:
+        # |z - Jw step|^2, the same as `chi2_after` without a second factorization).
+        if ev.chi2 - float(np.sum((ev.z - ev.Jw @ ev.step) ** 2)) <= POLISH_TOL:
             break
         H, g = ev.Jw.T @ ev.Jw, ev.Jw.T @ ev.z
         d = np.diag(H).copy()
