@@ -80,3 +80,61 @@ def test_a_report_is_written_again_from_its_runs(tmp_path, monkeypatch):
     monkeypatch.setitem(bench_speed.TARGETS, "help", ("help, relabelled", None))
     again = bench_speed.rerender(tmp_path)
     assert "| help, relabelled | – | 0.200 |" in again and "Medians over 1 rounds" in again
+
+
+def _imports_outside_fallbacks(tree) -> list[tuple[str, str, int]]:
+    """(module, name, line) of each `from legcal_bench... import name` not inside a try
+    whose handler catches ImportError (a probe's fallback for an older layout)."""
+    import ast
+
+    guarded = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Try) and any(
+                h.type is None or "ImportError" in ast.dump(h.type) for h in node.handlers):
+            for inner in node.body:
+                guarded |= {id(n) for n in ast.walk(inner)}
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("legcal_bench") and id(node) not in guarded:
+            out += [(node.module, a.name, node.lineno) for a in node.names]
+    return out
+
+
+def test_the_probes_use_only_what_the_oldest_baseline_has():
+    """Each probe runs on the baseline's package too (`bench-speed`'s default BASELINE, the
+    oldest it compares against): a name it imports from legcal_bench outside an
+    ImportError fallback must exist in that commit's source, or the old side of every
+    comparison fails (the probes once had to keep `tempfile` for this: files.scratch is
+    younger than the baseline)."""
+    import ast
+    import re
+    import subprocess
+
+    from legcal_bench.reports.bench_speed import BASELINE, _repo_root
+
+    root = _repo_root()
+    if subprocess.run(["git", "cat-file", "-e", f"{BASELINE}^{{commit}}"], cwd=root, capture_output=True).returncode:
+        pytest.skip(f"this clone lacks the baseline commit {BASELINE} (a shallow clone): nothing to compare with")
+
+    def source(module: str) -> str | None:
+        parts = module.split(".")
+        top = parts[1] if len(parts) > 1 else ""
+        base = [top] + parts[2:] if top in ("calibrators", "envs", "policies", "examples") else parts
+        for path in ("/".join(base) + ".py", "/".join(base) + "/__init__.py"):
+            r = subprocess.run(["git", "show", f"{BASELINE}:{path}"], cwd=root, capture_output=True, text=True)
+            if r.returncode == 0:
+                return r.stdout
+        return None
+
+    missing = []
+    probes = sorted({script for script, _, _ in GROUPS.values()})
+    for probe in probes:
+        for module, name, line in _imports_outside_fallbacks(ast.parse((HERE / probe).read_text())):
+            text = source(module)
+            defined = text is not None and (source(f"{module}.{name}") is not None or re.search(
+                rf"^(def|class) {name}\b|^{name}\s*[:=]|^from \S+ import .*\b{name}\b|^import .*\b{name}\b",
+                text, re.M))
+            if not defined:
+                missing.append(f"{probe}:{line}: {module}.{name}")
+    assert not missing, f"not in {BASELINE}: {missing}"
+    assert len(probes) == 5
