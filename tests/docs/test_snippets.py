@@ -16,13 +16,12 @@ import pytest
 
 from tests.docs import snippets as sn
 
-pytestmark = pytest.mark.xdist_group("wheel")  # the wheel and its environment, built once per worker
-
 RUN = [d for d in sn.DOCUMENTS if any(not s.not_run for s in sn.snippets(d))]
 
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory) -> Path:
+    """The wheel and its environment, built once per test process (about 3 s)."""
     work = tmp_path_factory.mktemp("wheel")
     return sn.install(sn.build_wheel(work), work / "venv")
 
