@@ -10,7 +10,7 @@ export OMP_NUM_THREADS ?= 1
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 
-.PHONY: demo test test-slow install bench-env bench-standard clean
+.PHONY: demo test test-slow docs install bench-env bench-standard clean
 
 # --no-compile: Python compiles a module when it is first imported, instead of every
 # installed file up front (torch's thousands): the install takes about 40 % less.
@@ -37,11 +37,17 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -n $(TEST_WORKERS) -m slow
 
+# The documentation site (MkDocs with Material) into site/, strict: a broken link or a
+# missing page fails (tests/docs/test_site.py builds it the same way in `make test`).
+docs: $(STAMP)
+	$(BIN)/mkdocs build --strict --site-dir site
+
+# Maintainers: regenerate committed results (they change only when named: --out).
 bench-env: $(STAMP)
 	$(BIN)/legcal-bench bench-env --out reports/bench_env
 
 bench-standard: $(STAMP)
-	$(BIN)/legcal-bench bench --suite standard
+	$(BIN)/legcal-bench bench --suite standard --out leaderboard --data runs/bench/data
 
 clean:
-	rm -rf $(VENV) runs
+	rm -rf $(VENV) runs site

@@ -200,11 +200,12 @@ def builtin_policies() -> list[str]:
 
 
 def resolve_policy(path: str | Path) -> Path:
-    """A spec path, or the name of one of our shipped policies."""
-    p = Path(path)
-    if not p.exists() and len(p.parts) == 1 and (WALKERS_DIR / p.name / "policy.yaml").is_file():
-        return WALKERS_DIR / p.name / "policy.yaml"
-    return p
+    """A spec path from the working directory, else an installed example
+    (`examples/<file>`) or the name of one of our shipped policies
+    (`legcal_bench.files.packaged`)."""
+    from legcal_bench.files.packaged import packaged
+
+    return packaged(path, {name: WALKERS_DIR / name / "policy.yaml" for name in builtin_policies()})
 
 
 def load_policy_spec(path: str | Path) -> PolicySpec:
@@ -252,8 +253,10 @@ def load_policy_spec(path: str | Path) -> PolicySpec:
     if model_file.is_dir():
         raise ConfigError(f"{w}: model.file {mfile!r} is a folder ({model_file}); give the network's file itself")
     if not model_file.is_file():
-        raise ConfigError(f"{w}: model.file {mfile!r}: no such file ({model_file}); paths are relative to "
-                          "the spec")
+        from legcal_bench.files.packaged import EXTERNAL_HINT, from_examples
+
+        raise ConfigError(f"{w}: model.file {mfile!r}: no such file ({model_file}); "
+                          + (EXTERNAL_HINT if from_examples(path) else "paths are relative to the spec"))
     joints = doc.get("joints")
     if not isinstance(joints, list) or not joints or not all(isinstance(j, str) and j for j in joints) or len(
             set(joints)) != len(joints):

@@ -200,7 +200,10 @@ def load_teacher_recipe(path) -> TeacherRecipe:
 
     from legcal_bench.errors import ConfigError
 
-    path = Path(path)
+    from legcal_bench.files.packaged import packaged
+
+    # A path from the working directory, else a built-in robot's recipe by its name (`a3`).
+    path = packaged(path, {p.stem: p for p in TEACHERS_DIR.glob("*.yaml")})
     where = f"teacher recipe {path}"
     try:
         doc = yaml.safe_load(path.read_text())

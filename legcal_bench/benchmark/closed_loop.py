@@ -5,8 +5,10 @@ For each robot with a walking policy (`CLOSED_LOOP_ROBOTS`) and each offset patt
 (`CLOSED_LOOP_OFFSETS`), one closed-loop evaluation (`legcal_bench.evaluation.closed_loop`)
 whose static session sets are calibrated by every variant, each variant then walking
 corrected by its own estimate against the same nominal, uncorrected and oracle walks.
-One result file per robot and pattern (`<root>/closed_loop/<robot>_<pattern>.json`),
-kept if its key (the evaluation's config and `RESULTS_VERSION`) matches.
+One result file per robot and pattern (`<root>/closed_loop/<robot>_<pattern>.json`: the
+summary the leaderboard shows), kept if its key (the evaluation's config and
+`RESULTS_VERSION`) matches; its per-trial rows beside it in `closed_loop/trials/` (raw
+output, not committed).
 
 The suite `closed-loop` runs the A3-like and A2-like robots with our own policies
 (issue #14; `--policy a3` names policies/walkers/a3/policy.yaml); `closed-loop-full`
@@ -29,12 +31,18 @@ CLOSED_LOOP_ROBOTS = {"a3": "a3", "a2": "a2", G1_EXAMPLE: "examples/unitree_g1.p
 CLOSED_LOOP_OFFSETS = ("paper@3", "random:3")
 PRIMARY = ("interfoot", "sensor")  # the variant whose walks the report's "corrected" row shows
 RESULTS_DIR = "closed_loop"
+TRIALS_DIR = "trials"  # under RESULTS_DIR: each result file's per-trial rows, same name
 
 
 def result_path(root: Path, robot: str, offsets: str) -> Path:
     from legcal_bench.robots import robot_label
 
     return root / RESULTS_DIR / f"{robot_label(robot)}_{offsets.replace(':', '').replace('@', '')}.json"
+
+
+def trials_path(result: Path) -> Path:
+    """Where the per-trial rows of a result file go."""
+    return result.parent / TRIALS_DIR / result.name
 
 
 def suite_configs(trials: int, robots=None) -> list[ClosedLoopConfig]:
@@ -79,9 +87,11 @@ def run_closed_loop_suite(root: str | Path, trials: int = 35, executor=None, rob
         except (OSError, ValueError):
             pass
         summary, trial_rows = evaluate(cfg, executor, progress=progress)
-        atomic_write_json(path, {"key": key(cfg), "provenance": code_version(), "summary": summary,
-                                 "trials": [{k: v for k, v in t.items() if k not in ("nominal", "uncorrected",
-                                                                                     "corrected", "oracle")}
-                                            for t in trial_rows]})
+        provenance = code_version()
+        atomic_write_json(trials_path(path), {"key": key(cfg), "provenance": provenance,
+                                              "trials": [{k: v for k, v in t.items()
+                                                          if k not in ("nominal", "uncorrected", "corrected", "oracle")}
+                                                         for t in trial_rows]})
+        atomic_write_json(path, {"key": key(cfg), "provenance": provenance, "summary": summary})
         written.append(path)
     return written

@@ -1,8 +1,12 @@
-"""`legcal-bench leaderboard`: tables and plots regenerated from the result files alone.
+"""`legcal-bench leaderboard`: tables and plots regenerated from the result rows alone.
 
-Reads every cell JSON under `leaderboard/results/`, writes `leaderboard/README.md` and
-`leaderboard/plots/*.png`. Nothing but the result files goes in (no clock, no machine
-facts), so the same files always give the same bytes.
+Reads the leaderboard's rows (`leaderboard/results.rows.json`, `rows_path`) and every
+cell JSON under `leaderboard/results/` (a cell replaces its row), writes the rows back
+and `leaderboard/README.md` and `leaderboard/plots/*.png`. The cells are `bench`'s raw
+output and its resume state, not committed; the rows keep of each cell the values the
+tables and plots read (`ROW_FIELDS`), so the committed rows regenerate the committed
+pages. Nothing but the results goes in (no clock, no machine facts), so the same rows
+always give the same bytes.
 """
 
 from __future__ import annotations
@@ -64,21 +68,164 @@ def _beats_baseline(cells: list[dict], baseline: list[dict]) -> str:
 COMPARED = ("recovery_rms", "paired_delta_rms", "pitch_sum_error", "heldout_true_after")
 
 
-def load_results(results: Path) -> tuple[dict, dict]:
+# The leaderboard's rows: per results folder `<name>/`, `<name>.rows.json` beside it. Of
+# each cell at scale 1 (the others are not shown), its identity, code version and these
+# values (dotted paths into the cell; a kind "joints" is a per-joint dict kept as a list in
+# the leg map's order, "hist" the held-out histogram with its zero tails cut, "solve" the
+# solve time METRICS reads: the total where a cell has no solve stage).
+ROWS_SUFFIX = ".rows.json"
+ROWS_FORMAT = 1
+ROW_KEYS = ("suite", "robot", "mode", "calibrator", "variant", "seed")
+ROW_FIELDS = (
+    ("native.score.heldout.foot_height_rms_true_mm.after", "value"),
+    ("native.score.heldout.foot_height_rms_mm.before", "value"),
+    ("native.score.heldout.foot_height_rms_mm.after", "value"),
+    ("native.score.heldout.sole_normal_rms_deg.after", "value"),
+    ("native.score.recovery.rms_error_deg", "value"),
+    ("native.heldout_foot_height_hist", "hist"),
+    ("injected.score.recovery.rms_error_deg", "value"),
+    ("injected.score.recovery.vs_imu_vertical.rms_error_deg", "value"),
+    ("injected.score.recovery.max_error_deg", "value"),
+    ("injected.score.recovery.pitch_sum_error_deg.left", "value"),
+    ("injected.score.recovery.pitch_sum_error_deg.right", "value"),
+    ("injected.score.recovery.per_joint_error_deg", "joints"),
+    ("injected.conditioning.kappa_H_data", "value"),
+    ("injected.conditioning.eigenvalues_H_data", "value"),
+    ("injected.timing_s.solve", "solve"),
+    ("paired_delta_rms_deg", "value"),
+)
+
+
+def rows_path(results: str | Path) -> Path:
+    """The rows file of a results folder: `leaderboard/results` -> `leaderboard/results.rows.json`."""
+    results = Path(results)
+    return results.with_name(results.name + ROWS_SUFFIX)
+
+
+def _identity(c: dict) -> tuple:
+    cell = c["cell"]
+    return (cell["suite"], c["robot"], cell["mode"], cell["calibrator"], cell["variant"], cell["seed"])
+
+
+def _leaf(c, path: str):
+    for k in path.split("."):
+        if not isinstance(c, dict) or k not in c:
+            return None
+        c = c[k]
+    return c
+
+
+def _put(c: dict, path: str, value) -> None:
+    *parents, last = path.split(".")
+    for k in parents:
+        c = c.setdefault(k, {})
+    c[last] = value
+
+
+def to_row(c: dict, provenances: list) -> list:
+    """A cell as its row: identity, the index of its code version in `provenances`
+    (appended if new), its error (None) and ROW_FIELDS' values (None where absent)."""
+    p = c.get("provenance")
+    if p not in provenances:
+        provenances.append(p)
+    row = [*_identity(c), provenances.index(p), c.get("error")]
+    if "error" in c:
+        return row
+    for path, kind in ROW_FIELDS:
+        v = _leaf(c, path)
+        if kind == "solve":
+            t = c["injected"]["timing_s"]
+            v = t.get("solve", t.get("total", 0.0))
+        elif v is not None and kind == "joints":
+            v = [v[j] for j in c["joint_names"]]
+        elif v is not None and kind == "hist":
+            v = {k: counts if k == "edges_mm" else _cut(counts) for k, counts in v.items()}
+        row.append(v)
+    return row
+
+
+def _cut(counts: list) -> list:
+    """[index of the first nonzero bin, the bins from it to the last nonzero one]."""
+    nz = [i for i, n in enumerate(counts) if n]
+    return [nz[0], *counts[nz[0]:nz[-1] + 1]] if nz else [len(counts)]
+
+
+def from_row(row: list, provenances: list, joint_names: dict) -> dict:
+    """The cell a row was made from, as far as the leaderboard reads it."""
+    suite, robot, mode, calibrator, variant, seed, p, error = row[:8]
+    c: dict = {"cell": {"suite": suite, "mode": mode, "calibrator": calibrator, "variant": variant, "seed": seed},
+               "robot": robot}
+    if provenances[p] is not None:
+        c["provenance"] = provenances[p]
+    if error is not None:
+        c["error"] = error
+        return c
+    c["joint_names"] = joint_names[robot]
+    c["injected"] = {"conditioning": {}}  # read with .get: a cell without conditioning numbers has it empty
+    for (path, kind), v in zip(ROW_FIELDS, row[8:]):
+        if v is None:
+            continue
+        if kind == "joints":
+            v = dict(zip(joint_names[robot], v))
+        elif kind == "hist":
+            n = v["edges_mm"][2]
+            v = {k: b if k == "edges_mm" else [0] * b[0] + b[1:] + [0] * (n - b[0] - len(b) + 1) for k, b in v.items()}
+        _put(c, path, v)
+    return c
+
+
+def read_rows(path: str | Path) -> list[dict]:
+    """The cells of a rows file (`from_row`); none if it does not exist."""
+    path = Path(path)
+    if not path.is_file():
+        return []
+    d = json.loads(path.read_text())
+    return [from_row(r, d["provenance"], d["joint_names"]) for r in d["rows"]]
+
+
+def write_rows(path: str | Path, cells: list[dict]) -> None:
+    """`cells` (at scale 1) as a rows file, in `_identity` order."""
+    from legcal_bench.files.atomic import rows_json
+
+    provenances: list = []
+    cells = sorted(cells, key=_identity)
+    rows = [to_row(c, provenances) for c in cells]
+    names = {c["robot"]: c["joint_names"] for c in cells if "joint_names" in c}
+    atomic_write_text(path, rows_json({"format": ROWS_FORMAT, "columns": [*ROW_KEYS, "provenance", "error",
+                                                                          *(f for f, _ in ROW_FIELDS)],
+                                       "provenance": provenances, "joint_names": names, "rows": rows}))
+
+
+def read_cells(results: str | Path) -> list[dict]:
+    """The cells at scale 1 of a results folder: its rows file's, each replaced by the
+    cell file of the same identity under the folder if there is one, in `_identity` order."""
+    results = Path(results)
+    cells = {_identity(c): c for c in read_rows(rows_path(results))}
+    for p in sorted(results.rglob("*.json")) if results.is_dir() else []:
+        c = json.loads(p.read_text())
+        if c["cell"].get("scale", 1.0) == 1.0:
+            cells[_identity(c)] = c
+    return [cells[k] for k in sorted(cells)]
+
+
+def group(cells: list[dict]) -> tuple[dict, dict]:
     """(cells by (suite, robot, mode) and calibrator-variant, failed cells likewise)."""
     groups: dict = defaultdict(lambda: defaultdict(list))
     failed: dict = defaultdict(lambda: defaultdict(list))
-    for p in sorted(results.rglob("*.json")):
-        c = json.loads(p.read_text())
+    for c in cells:
         cell = c["cell"]
-        if cell.get("scale", 1.0) != 1.0:
-            continue
         key = (cell["suite"], c["robot"], cell["mode"])
         (failed if "error" in c else groups)[key][f"{cell['calibrator']}-{cell['variant']}"].append(c)
     for g in groups.values():
-        for cells in g.values():
-            cells.sort(key=lambda c: c["cell"]["seed"])
+        for cs in g.values():
+            cs.sort(key=lambda c: c["cell"]["seed"])
     return groups, failed
+
+
+def load_results(results: Path) -> tuple[dict, dict]:
+    """(cells by (suite, robot, mode) and calibrator-variant, failed cells likewise), of
+    a results folder and its rows (`read_cells`)."""
+    return group(read_cells(results))
 
 
 def _fmt(vals: list[float], nd: int) -> str:
@@ -200,11 +347,11 @@ DESIGNED = "designed"  # the designed protocols' leaderboard, under the main one
 
 
 def _protocol_comparison(root: Path, default: dict | None = None) -> list[str]:
-    """The designed protocols (`root/designed/results`) against the default stances
-    (`root/results`; `default`: its cells, if loaded already), paired seed by seed per
-    robot, weld floor: one row per variant."""
+    """The designed protocols (`root/designed/results` and its rows) against the default
+    stances (`root/results` and its rows; `default`: its cells, if loaded already),
+    paired seed by seed per robot, weld floor: one row per variant."""
     designed = root / DESIGNED / "results"
-    if not designed.is_dir() or not (root / "results").is_dir():
+    if not all(p.is_dir() or rows_path(p).is_file() for p in (designed, root / "results")):
         return []
     groups, failed = load_results(designed)
     if default is None:
@@ -333,11 +480,15 @@ def _report_sections(root: Path) -> list[str]:
 
 def generate(root: str | Path = "leaderboard") -> str:
     root = Path(root)
-    groups, failed = load_results(root / "results")
+    cells = read_cells(root / "results")
+    if cells:
+        write_rows(rows_path(root / "results"), cells)
+    groups, failed = group(cells)
     plots = _plots(groups, root / "plots") if groups else {}
     L = ["# legcal-bench leaderboard", "",
-         "Generated by `legcal-bench leaderboard` from the files in `results/` alone (one JSON per cell, written by "
-         "`legcal-bench bench`); regenerating gives the same bytes. Mean ± std over seeds.", "",
+         "Generated by `legcal-bench leaderboard` from the rows in `results.rows.json` alone (of each cell `legcal-bench "
+         "bench` writes to `results/`, the values shown here; `results/` itself is not committed: `bench` writes it "
+         "again, and its cells replace their rows); regenerating gives the same bytes. Mean ± std over seeds.", "",
          "Columns: the headline, **held-out foot height on the true postures** = RMS of p_Lz − p_Rz on three "
          "held-out sessions of the native set, from the true joint angles minus the native offsets, corrected by "
          "the method's estimate, in the true vertical (noise-free: it ranks methods); **beats zero** = seeds in "

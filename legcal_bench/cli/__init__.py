@@ -9,6 +9,15 @@ each command imports what it needs inside its `cmd_*` function. The facts its op
 show (effect, offset and sensor preset names; the training defaults) live in
 standard-library modules that the simulation and training import too
 (`legcal_bench.sim.names`, `legcal_bench.evaluation.distill_config`).
+
+As users read it (issue #43): the top-level help lists the commands under the headings of
+one table, `legcal_bench.cli.groups.COMMAND_GROUPS` (everyday commands first, the
+maintainers' report generators last), each still a direct subcommand; every option's
+help shows its default, and `-0.02,0.01` is a value, not an option
+(`legcal_bench.cli.parsing`); `legcal_bench.cli.reference.markdown()` renders the whole
+command line for the docs. No default output path is inside a committed folder: commands
+write under runs/, and a committed report, leaderboard or shipped policy changes only
+when --out names it.
 """
 
 from __future__ import annotations
@@ -21,17 +30,39 @@ import sys
 os.environ.setdefault("MUJOCO_GL", "egl")
 
 from legcal_bench.cli import benchmark, calibration, data, logs, reports, robots, walking  # noqa: E402
+from legcal_bench.cli.groups import COMMAND_GROUPS, grouped_commands  # noqa: E402
+from legcal_bench.cli.parsing import NEGATIVE_VALUE, LegcalParser, TopParser  # noqa: E402
 from legcal_bench.errors import LegcalError  # noqa: E402
 
+# The modules that add the commands; the headings the help lists them under are
+# `COMMAND_GROUPS` (legcal_bench.cli.groups), a table of its own.
 GROUPS = (data, logs, robots, calibration, walking, benchmark, reports)
+
+__all__ = ["COMMAND_GROUPS", "build_parser", "main"]
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="legcal-bench", description="Humanoid leg joint-offset calibration benchmark")
-    sub = p.add_subparsers(dest="command", required=True)
+    p = TopParser(prog="legcal-bench", description="Humanoid leg joint-offset calibration benchmark",
+                  epilog="`legcal-bench COMMAND --help` shows a command's options, each with its default. Commands "
+                         "write under runs/ unless --out (or the command's output option) names another place.")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND", parser_class=LegcalParser)
     for group in GROUPS:
         group.add_commands(sub)
+    _check_table(p)
     return p
+
+
+def _check_table(p: TopParser) -> None:
+    """Every command listed once in COMMAND_GROUPS, and no option that looks like a
+    negative number (the parser takes `-0.02,...` for a value)."""
+    commands, listed = set(p.commands()), grouped_commands()
+    if sorted(commands) != sorted(listed):
+        raise RuntimeError(f"legcal_bench.cli.groups.COMMAND_GROUPS lists {sorted(listed)}, the parser has "
+                           f"{sorted(commands)}: list every command under one heading, once")
+    for name, parser in p.commands().items():
+        for action in parser._actions:
+            if any(NEGATIVE_VALUE.match(s) for s in action.option_strings):
+                raise RuntimeError(f"{name} {action.option_strings}: an option may not look like a negative number")
 
 
 INTERRUPTED = 130  # the shell's exit status for a command ended by Ctrl-C (128 + SIGINT)

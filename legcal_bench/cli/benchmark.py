@@ -14,6 +14,8 @@ from legcal_bench.cli.robots import door
 
 # What Ctrl-C keeps (`legcal_bench.cli.main` prints it): each finished cell, session set
 # and model-gap case is a whole file, and a rerun computes only the others.
+BENCH_OUT = "runs/bench"  # the committed leaderboard/ changes only when --out names it
+
 RESUME_CELLS = ("the finished cells and session sets are kept under --out and --data; rerun the same command to "
                 "resume (only the unfinished ones are computed)")
 
@@ -172,7 +174,8 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--robots", "--robot", nargs="+", default=default,
                    help="robots: built-in names or leg-map paths (default: "
                         + (" ".join(default) if default else "the suite's") + ")")
-    p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names")
+    p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names "
+                                                "(default: the leg map's)")
     p.add_argument("--stances", nargs="+", default=None,
                    help="stances to record, as in collect (default: I II III IV; e.g. I II III IV tall, the range "
                         "stance that separates a knee encoder scale); held-out sessions follow them")
@@ -181,7 +184,7 @@ def _robot_options(p: argparse.ArgumentParser, default) -> None:
                    help="slower posture motion, as in collect: a factor in [0.1, 10] (default 1; stance seconds are "
                         "not scaled with it)")
     p.add_argument("--protocol", default=None, help="a protocol file (legcal-bench design --out): its stances "
-                                                    "instead of the suite's")
+                                                    "instead of the suite's (default: none, the suite's stances)")
     p.add_argument("--native", default=None,
                    help="the robots' own (factory) offsets under the injection: random:<deg> (default random:1.2, "
                         "uniform per joint), paper-base (the paper's real robots' base offsets), none")
@@ -274,13 +277,19 @@ def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import SUITES
 
     suites = ", ".join(f"{n} ({s.description}; tags: {', '.join(s.tags)})" for n, s in SUITES.items())
-    bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the leaderboard")
-    bn.add_argument("--suite", default="smoke", help=f"one of: {suites}")
+    bn = sub.add_parser("bench", help="run a benchmark suite (collect, calibrate, score every cell) and the "
+                                      "leaderboard",
+                        description="Plan a suite's cells (robot x floor x seed x calibrator variant), collect the "
+                                    "session sets (cached under --data), calibrate and score every cell (one result "
+                                    "file each under --out/results; a rerun computes only the missing ones) and "
+                                    "write the leaderboard, --out/README.md with its plots. The committed "
+                                    "leaderboard changes only when named: --out leaderboard.")
+    bn.add_argument("--suite", default="smoke", help=f"the suite to run, one of: {suites}")
     _robot_options(bn, None)
     bn.add_argument("--modes", nargs="+", default=None, help="override the suite's floor modes: kinematic, weld, "
-                                                             "contact")
+                                                             "contact (default: the suite's)")
     bn.add_argument("--seeds", type=int, default=None, help="override the suite's number of seeds, at least 1 "
-                                                             "(closed-loop: trials)")
+                                                             "(closed-loop: trials; default: the suite's)")
     bn.add_argument("--effect-seeds", type=int, default=None,
                     help="modelgap suite: seeds per library effect (default --seeds; clean sets are 2x --seeds, the "
                          "near-threshold, multi-effect and outside cases --seeds each)")
@@ -296,25 +305,37 @@ def add_commands(sub) -> None:
                          "starts from, default interfoot)")
     bn.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
     bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead; "
-                                                      "refused at once if nothing answers there")
+                                                      "refused at once if nothing answers there (default: none, "
+                                                      "local worker processes)")
     bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached (a writable folder; "
                                                               "default runs/bench/data)")
-    bn.add_argument("--out", default="leaderboard", help="leaderboard root: results/ and README.md (a writable folder; "
-                                                         "default leaderboard). Exit code 1 if a cell failed (the "
-                                                         "summary says how many and why), 2 for a refused option")
-    bn.add_argument("--quiet", action="store_true", help="no progress bars")
+    bn.add_argument("--out", default=BENCH_OUT,
+                    help=f"leaderboard root: results/ and README.md (a writable folder; default {BENCH_OUT}; the "
+                         f"committed leaderboard changes only when named: --out leaderboard). Exit code 1 if a cell "
+                         f"failed (the summary says how many and why), 2 for a refused option")
+    bn.add_argument("--quiet", action="store_true", help="no progress bars (default: progress bars)")
     bn.set_defaults(func=cmd_bench, resume=RESUME_CELLS)
 
     cp = sub.add_parser("compare", help="two result folders (e.g. a designed protocol's and the default's) "
-                                        "paired seed by seed, per calibrator variant")
+                                        "paired seed by seed, per calibrator variant",
+                        description="Pair the result files of two folders cell by cell (same robot, floor and "
+                                    "seed) and print, per calibrator variant, the metric's mean in each and how "
+                                    "often A is lower. Reads result files only; writes nothing.")
     cp.add_argument("--a", required=True, help="result folder A (e.g. leaderboard/designed_a2/results)")
     cp.add_argument("--b", required=True, help="result folder B (e.g. leaderboard/results)")
     cp.add_argument("--robot", required=True, help="robot whose cells to pair (as named in the result files)")
-    cp.add_argument("--mode", default="weld", help="floor mode of the cells to pair (default weld)")
-    cp.add_argument("--metric", default="recovery_rms", help="a leaderboard metric key (default recovery_rms)")
+    cp.add_argument("--mode", default="weld", help="floor mode of the cells to pair: kinematic, weld or contact "
+                                                   "(default weld)")
+    cp.add_argument("--metric", default="recovery_rms", help="a leaderboard metric key, e.g. recovery_rms (deg) "
+                                                             "(default recovery_rms; an unknown key lists them)")
     cp.set_defaults(func=cmd_compare)
 
-    sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask")
+    sw = sub.add_parser("sweep", help="seeds x robots x calibrators x offset scales, through local processes or Dask",
+                        description="Collect, calibrate and score every cell of robots x calibrators x seeds x "
+                                    "multiples of the paper's offset injection on one floor, and print each "
+                                    "variant's recovery RMS (deg) per scale. Session sets go to --out/data, one "
+                                    "result file per cell to --out/results (a rerun computes only the missing "
+                                    "ones).")
     _robot_options(sw, ["a2", "a3"])
     sw.add_argument("--calibrators", nargs="+", default=None, help="only these registered calibrators (default all)")
     sw.add_argument("--mode", default="weld", help="floor mode: kinematic, weld or contact (default weld)")
@@ -326,13 +347,18 @@ def add_commands(sub) -> None:
     sw.add_argument("--heldout", type=int, default=3, help="held-out sessions, as in collect (default 3)")
     sw.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
     sw.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786); refused at once if "
-                                                      "nothing answers there")
+                                                      "nothing answers there (default: none, local worker processes)")
     sw.add_argument("--out", default="runs/sweep", help="a writable folder for data/ and results/ (default "
                                                         "runs/sweep). Exit code 1 if a cell failed, 2 for a refused "
                                                         "option")
-    sw.add_argument("--quiet", action="store_true", help="no progress bars")
+    sw.add_argument("--quiet", action="store_true", help="no progress bars (default: progress bars)")
     sw.set_defaults(func=cmd_sweep, resume=RESUME_CELLS)
 
-    lb = sub.add_parser("leaderboard", help="regenerate leaderboard/README.md and plots from the result files")
-    lb.add_argument("--out", default="leaderboard", help="leaderboard root holding results/ (default leaderboard)")
+    lb = sub.add_parser("leaderboard", help="regenerate a leaderboard's README.md and plots from its result files",
+                        description="Read the result files under --out/results and write --out/README.md and its "
+                                    "plots again (the same files give the same bytes); no cell is run. The "
+                                    "committed leaderboard changes only when named: --out leaderboard.")
+    lb.add_argument("--out", default=BENCH_OUT,
+                    help=f"leaderboard root holding results/ (default {BENCH_OUT}, where bench writes; the "
+                         f"committed leaderboard changes only when named: --out leaderboard)")
     lb.set_defaults(func=cmd_leaderboard)

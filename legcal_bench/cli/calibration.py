@@ -11,6 +11,9 @@ from legcal_bench import inputs
 from legcal_bench.cli.robots import COUNT0, door, robot_args
 from legcal_bench.errors import ConfigError
 
+CALIBRATE_OUT = "runs/calibrate/result.json"
+EXPORT_OUT = "runs/export/offsets.yaml"
+
 
 def writable_parent(path: str, option: str) -> None:
     """Create `path`'s folder now, so an unwritable output fails before the work (and
@@ -392,10 +395,18 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
 
 def add_commands(sub) -> None:
     dg = sub.add_parser("diagnose", help="model gap: does the offsets-only model explain the recordings; where the "
-                                         "residual lives; which library effect is missing, or 'unexplained'")
+                                         "residual lives; which library effect is missing, or 'unexplained'",
+                        description="Fit the offsets-only model to the training recordings, starting from a "
+                                    "calibrator's offsets (--result, or --calibrator run now); test whether the "
+                                    "residual is the declared noise (whitened chi-square, leave-one-stance-out "
+                                    "gap); trace it to channels, stances and legs; and, when it is not noise, "
+                                    "select library effects (BIC, cross-validation) to a verdict: explained, "
+                                    "selected, ambiguous or unexplained. Writes diagnosis.md, diagnosis.json and "
+                                    "trace.png into --out.")
     robot_args(dg)
-    dg.add_argument("--bags", required=True, help="directory of recordings")
-    dg.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
+    dg.add_argument("--bags", required=True, help="directory of recordings (collect --out or import --out)")
+    dg.add_argument("--allow-partial", action="store_true", help="read a folder without session.json (every *.npz "
+                                                                 "in it; default: refused)")
     dg.add_argument("--result", default=None, help="a calibrate result JSON of any calibrator, for this robot: the "
                                                    "diagnosis's fit starts from its offsets (default: run "
                                                    "--calibrator now)")
@@ -403,19 +414,26 @@ def add_commands(sub) -> None:
                                                               "starts from, when no --result (default interfoot)")
     dg.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="an option of --calibrator, typed from its constructor (repeatable)")
-    dg.add_argument("--effects", nargs="+", default=None, help="candidate library effects (default: all registered)")
+    dg.add_argument("--effects", nargs="+", default=None, metavar="EFFECT",
+                    help="candidate library effects (default: all registered)")
     dg.add_argument("--out", required=True, help="report folder: diagnosis.md, diagnosis.json, trace.png (checked "
                                                  "writable before the diagnosis)")
     dg.add_argument("--walk", default=None, metavar="POLICY",
                     help="closed loop before/after: walk this policy (a built-in walker name or a spec YAML) with the "
                          "true offsets (the recordings' ground truth; for real logs, the diagnosis's final estimate) "
-                         "corrected by the offsets-only estimate and by the estimate after the diagnosis")
+                         "corrected by the offsets-only estimate and by the estimate after the diagnosis (default: "
+                         "no walks)")
     dg.add_argument("--walk-trials", type=int, default=5, help="seeds of the --walk comparison, at least 1 "
                                                                "(default 5)")
-    dg.add_argument("--quiet", action="store_true", help="no progress output")
+    dg.add_argument("--quiet", action="store_true", help="no progress output (default: progress lines)")
     dg.set_defaults(func=cmd_diagnose)
 
-    k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings")
+    k = sub.add_parser("calibrate", help="estimate the offsets from a directory of recordings",
+                       description="Read a session folder's training recordings (stances and standing; held-out "
+                                   "sessions never reach a calibrator), run a registered calibrator and write its "
+                                   "result JSON: offsets (rad), pitch sums, conditioning, diagnostics, timings and "
+                                   "warnings. `score`, `check`, `diagnose`, `report`, `export` and `walk "
+                                   "--correction` read that file.")
     robot_args(k)
     k.add_argument("--bags", required=True, help="directory of recordings (legcal-bench collect --out, or your own)")
     k.add_argument("--allow-partial", action="store_true",
@@ -426,7 +444,8 @@ def add_commands(sub) -> None:
                                                    "the generalized least squares), matched, operating (the paper's "
                                                    "weights and priors, biased on perfect data), a3_operating, "
                                                    "a2_operating")
-    k.add_argument("--solver", default=None, help="interfoot: projected (default) or alternating (the paper's)")
+    k.add_argument("--solver", default=None, help="interfoot's solver: projected or alternating (the paper's) "
+                                                  "(default: the calibrator's, projected)")
     k.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 "
                         "(repeatable; an unknown key lists the calibrator's options, types and defaults)")
@@ -434,12 +453,17 @@ def add_commands(sub) -> None:
                    help="interfoot: also fit these model-gap effects (plug-ins of the entry-point group "
                         "legcal_bench.effects; built in: leg_length, encoder_scale, compliance, imu_tilt, hip_axis): "
                         "the result holds the offsets before and after, each parameter with its posterior standard "
-                        "deviation, and what the data confound it with")
-    k.add_argument("--out", default="result.json", help="result JSON (default result.json)")
+                        "deviation, and what the data confound it with (default: offsets only)")
+    k.add_argument("--out", default=CALIBRATE_OUT, help=f"result JSON to write, its folder made if needed (default "
+                                                        f"{CALIBRATE_OUT})")
     k.add_argument("--plots", default=None, help="directory for the observability plot (default: none drawn)")
     k.set_defaults(func=cmd_calibrate)
 
-    sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings")
+    sc = sub.add_parser("score", help="score a result against the ground truth kept with simulated recordings",
+                        description="Compare a calibration result with the injected offsets the simulated "
+                                    "recordings keep (recovery RMS and max error, deg; pitch-sum errors) and "
+                                    "score it on the held-out sessions (foot height, mm, and sole normal, deg, RMS "
+                                    "before and after the correction). Writes nothing; prints text or JSON.")
     sc.add_argument("--bags", required=True, help="directory of recordings with their ground truth (collect --out); "
                                                   "truth files of another session set are refused")
     sc.add_argument("--allow-partial", action="store_true",
@@ -447,35 +471,53 @@ def add_commands(sub) -> None:
                          "otherwise refused, as a collection that may have stopped half-way")
     sc.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out)")
     sc.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
-    sc.add_argument("--json", action="store_true", help="print the scores as JSON")
-    sc.add_argument("--residuals", action="store_true", help="include per-frame held-out residuals in the JSON")
+    sc.add_argument("--json", action="store_true", help="print the scores as JSON (default: text)")
+    sc.add_argument("--residuals", action="store_true", help="include per-frame held-out foot-height residuals "
+                                                             "(mm) in the JSON (default: left out)")
     sc.set_defaults(func=cmd_score)
 
     ck = sub.add_parser("check", help="check a session set's data: frozen channels, swapped columns, IMU axes, "
-                                      "soles apart, slides, yaw creep, lifted heels (no calibration)")
+                                      "soles apart, slides, yaw creep, lifted heels (no calibration)",
+                        description="Measure each recording of a session set against the data checks' limits "
+                                    "(identical-value runs, inter-foot dispersion, the soles' plane, the IMU's "
+                                    "vertical against the posture, slide, yaw creep, sole tilt change) and print "
+                                    "the warnings, naming stance, channel and likely cause. Judged at --result's "
+                                    "offsets, or at the offsets the framework's own fit profiles out. Writes "
+                                    "nothing.")
     robot_args(ck)
-    ck.add_argument("--bags", required=True, help="directory of recordings")
-    ck.add_argument("--allow-partial", action="store_true", help="read a folder without session.json")
+    ck.add_argument("--bags", required=True, help="directory of recordings (collect --out or import --out)")
+    ck.add_argument("--allow-partial", action="store_true", help="read a folder without session.json (every *.npz "
+                                                                 "in it; default: refused)")
     ck.add_argument("--result", default=None, help="also judge the data corrected by this result's (this robot's) "
                                                    "offsets "
                                                    "(the calibrators do this with their own); default: the "
                                                    "offsets profiled out by the framework's own fit of the data")
-    ck.add_argument("--json", action="store_true", help="print the statistics and warnings as JSON")
+    ck.add_argument("--json", action="store_true", help="print the statistics and warnings as JSON (default: a "
+                                                        "table)")
     ck.set_defaults(func=cmd_check)
 
     de = sub.add_parser("design", help="stance design: the default stances' predicted information against a "
                                        "greedy E-optimal choice of sampled stances the robot holds in simulation "
-                                       "(same frame count)")
+                                       "(same frame count)",
+                        description="Predict the information (the Fisher information's smallest eigenvalues, the "
+                                    "offsets' standard deviations) of the default stances and of a greedy "
+                                    "E-optimal choice among sampled candidate stances with the same frame budget, "
+                                    "each candidate screened in simulation for the hold check (weld and contact "
+                                    "floors). Optionally writes the designed stances as a protocol file (--out) "
+                                    "and a plot (--plot).")
     robot_args(de)
     de.add_argument("--count", type=int, default=4, help="stances to choose, at least 1 (default 4)")
     de.add_argument("--frames", type=int, default=2400, help="frame budget of the stances in all, at 50 Hz (default "
                                                              "2400: the default protocol's four 12 s stances); "
                                                              "both protocols get it")
-    de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances (default 120)")
-    de.add_argument("--seed", type=int, default=0, help="candidate sampling seed (default 0)")
+    de.add_argument("--candidates", type=int, default=120, help="sampled candidate stances, at least --count "
+                                                                "(default 120)")
+    de.add_argument("--seed", type=int, default=0, help="candidate sampling seed: an integer in [0, 2^32 - 1] "
+                                                        "(default 0)")
     de.add_argument("--ranges", default="default", choices=["default", "wide"],
                     help="candidate ranges: near the paper's stances (default) or wider, up to 3x stance I's motion")
-    de.add_argument("--sensors", default="realistic", help="sensor preset whose noise whitens the rows")
+    de.add_argument("--sensors", default="realistic", help="sensor preset whose declared noise whitens the "
+                                                           "information's rows")
     de.add_argument("--margin", type=float, default=0.75, help="hold screen, weld: the fraction (0 to 1] of the "
                                                                "pelvis hold limit a chosen stance must stay within "
                                                                "(default 0.75)")
@@ -485,40 +527,54 @@ def add_commands(sub) -> None:
                                                                "phases, factory offsets; default 8), plus two cases "
                                                                "with the factory offsets at their bound")
     de.add_argument("--no-screen", action="store_true", help="skip the hold screen (kinematics only; the collected "
-                                                             "protocol may then fail the hold check)")
+                                                             "protocol may then fail the hold check; default: "
+                                                             "screened)")
     de.add_argument("--budget", type=float, default=600.0,
                     help="seconds after which no further stance is screened: the design then stops saying how far "
                          "it got (default 600; 0 or less: no limit)")
     de.add_argument("--out", default=None, help="write the designed stances as a protocol file (YAML) for "
-                                                "collect/bench --protocol")
+                                                "collect/bench --protocol (default: none written)")
     de.add_argument("--plot", default=None, help="write a PNG: smallest eigenvalues and per-offset predicted std, "
-                                                 "default against designed")
-    de.add_argument("--json", action="store_true", help="print the design as JSON")
+                                                 "the default stances against the designed (default: none drawn)")
+    de.add_argument("--json", action="store_true", help="print the design as JSON (default: text)")
     de.set_defaults(func=cmd_design)
 
     xc = sub.add_parser("excite", help="learn an open-loop excitation motion on the static env's information-gain "
-                                       "reward (cross-entropy method), against no motion and the protocol's")
+                                       "reward (cross-entropy method), against no motion and the protocol's",
+                        description="Learn the amplitudes of an open-loop pelvis motion in one stance by the "
+                                    "cross-entropy method on the static env's information-gain reward (log det of "
+                                    "the information gained), with the paper's offsets and realistic sensors, and "
+                                    "compare it with no motion and the protocol's motion (return, smallest "
+                                    "eigenvalue, pelvis excursion, hold check). Optionally writes the result as "
+                                    "JSON (--out).")
     robot_args(xc)
-    xc.add_argument("--stance", default="I", help="stance (default I)")
+    xc.add_argument("--stance", default="I", help="the stance to excite: I, II, III or IV (default I)")
     xc.add_argument("--mode", default="weld", choices=["kinematic", "weld", "contact"], help="floor model "
                                                                                           "(default weld)")
     xc.add_argument("--frames", type=int, default=600, help="frames per episode (default 600 = 12 s at 50 Hz)")
     xc.add_argument("--iterations", type=int, default=6, help="cross-entropy iterations, at least 1 (default 6)")
-    xc.add_argument("--population", type=int, default=12, help="episodes per iteration (default 12)")
-    xc.add_argument("--elite", type=int, default=3, help="best episodes the next iteration is fitted to (default 3)")
-    xc.add_argument("--seed", type=int, default=0, help="sampling seed (default 0)")
-    xc.add_argument("--out", default=None, help="write the result as JSON (a file)")
-    xc.add_argument("--json", action="store_true", help="print the result as JSON")
+    xc.add_argument("--population", type=int, default=12, help="episodes per iteration, at least 1 (default 12)")
+    xc.add_argument("--elite", type=int, default=3, help="best episodes the next iteration is fitted to, at least 1 "
+                                                         "(default 3)")
+    xc.add_argument("--seed", type=int, default=0, help="sampling seed: an integer in [0, 2^32 - 1] (default 0)")
+    xc.add_argument("--out", default=None, help="write the result as JSON (a file; default: none written)")
+    xc.add_argument("--json", action="store_true", help="print the result as JSON (default: a table)")
     xc.set_defaults(func=cmd_excite)
 
     ex = sub.add_parser("export", help="write a result's offsets for the robot (YAML in its joint names), and "
                                        "optionally a ROS 2 parameter file and a copy of its MJCF or URDF with the "
-                                       "correction folded in")
+                                       "correction folded in",
+                        description="Apply a calibration result on the robot: its offsets as YAML in the robot's "
+                                    "own joint names (q = q_enc + offset), optionally a ROS 2 parameter file, a "
+                                    "copy of its URDF whose joint origins fold the offsets in (checked with "
+                                    "Pinocchio before it is written) and a copy of its MJCF whose leg joints' ref "
+                                    "is lowered by them.")
     ex.add_argument("--result", required=True, help="result JSON (legcal-bench calibrate --out); required")
     ex.add_argument("--robot", default=None, help="robot (default: the one the result was calibrated for)")
     ex.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names "
                                                  "(default: the leg map's)")
-    ex.add_argument("--out", default="offsets.yaml", help="offsets YAML (default offsets.yaml; replaced if it exists)")
+    ex.add_argument("--out", default=EXPORT_OUT, help=f"offsets YAML to write, its folder made if needed (default "
+                                                     f"{EXPORT_OUT}; replaced if it exists)")
     ex.add_argument("--mjcf-out", default=None, help="new folder for the corrected MJCF and its assets "
                                                      "(default: none written)")
     ex.add_argument("--ros2-params", default=None, metavar="PATH",

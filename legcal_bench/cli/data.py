@@ -33,15 +33,20 @@ def cmd_collect(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    c = sub.add_parser("collect", help="simulate static double-support recordings with known offsets")
+    c = sub.add_parser("collect", help="simulate static double-support recordings with known offsets",
+                       description="Simulate a session set on the static double-support env: a straight-leg "
+                                   "standing phase, the stances (I to IV, or a protocol file's) and held-out "
+                                   "sessions, the encoders reading the injected offsets. Each recording is a file "
+                                   "with its ground truth kept beside it (for `score`), plus a session manifest; "
+                                   "the folder is what `calibrate --bags` reads.")
     robot_args(c)
     c.add_argument("--sim-model", default=None,
                    help="simulate this instead: an MJCF file (.xml; an edited copy of the robot's, same joint "
                         "names: the generic model gap) or a robot (name or leg map); recordings still name "
-                        "--robot, the nominal model calibrators use")
+                        "--robot, the nominal model calibrators use (default: --robot's own model)")
     c.add_argument("--effect", action="append", default=None, metavar="NAME:key=value,...",
-                   help=f"a reality effect the calibration model lacks (repeatable; only the ground truth says it "
-                        f"is there): {EFFECTS_HELP}")
+                   help=f"a reality effect the calibration model lacks (repeatable; default: none; only the ground "
+                        f"truth says it is there): {EFFECTS_HELP}")
     c.add_argument("--mode", default="weld", choices=("kinematic", "weld", "contact"), help="floor model (default weld)")
     c.add_argument("--stances", nargs="+", default=["I", "II", "III", "IV"],
                    help="stances to record (default I II III IV; the optional load-varied push and press: feet "
@@ -61,7 +66,7 @@ def add_commands(sub) -> None:
     c.add_argument("--knee-error-deg", type=float, default=0.3,
                    help="true knee minus mechanical straight angle while standing, deg, within +-5 (default 0.3)")
     c.add_argument("--protocol", default=None, help="a protocol file (legcal-bench design --out): record its stances "
-                                                    "instead of --stances")
+                                                    "instead of --stances (default: none, --stances)")
     c.add_argument("--period-scale", type=float, default=1.0,
                    help="slower posture motion: its periods x this (2: a quarter of the IMU's motion acceleration; "
                         "give --stance-seconds x this to cover the same motion)")

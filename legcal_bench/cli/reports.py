@@ -7,6 +7,7 @@ import argparse
 from pathlib import Path
 
 DEFAULT_FIXTURE = Path("tests/fixtures/regression.json")
+RUNS = "runs"  # where every report command writes unless --out names a committed report
 
 
 def cmd_reproduce(a: argparse.Namespace) -> int:
@@ -148,67 +149,121 @@ def cmd_contact_holds(a: argparse.Namespace) -> int:
     return _cases_report(a, "contact-holds", contact_holds, contact_holds.CASES, "contact_holds")
 
 
+def report_out(command: str) -> str:
+    """A report command's default folder: under runs/, never the committed report (which
+    changes only when --out names it)."""
+    return f"{RUNS}/{command}"
+
+
+def _out(p: argparse.ArgumentParser, command: str, committed: str, what: str) -> None:
+    """The --out option of a report command: `runs/<command>` by default; `committed`, the
+    report folder the repository keeps, named in the help as the way to update it."""
+    p.add_argument("--out", default=report_out(command),
+                   help=f"report folder: {what} (default {report_out(command)}; the committed report changes only "
+                        f"when named: --out {committed})")
+
+
+def _quiet(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--quiet", action="store_true", help="no progress bars (default: progress bars)")
+
+
 def add_commands(sub) -> None:
     from legcal_bench.benchmark.suites import G1_EXAMPLE
 
-    rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)")
-    rp.add_argument("--out", default="reports/reproduction")
-    rp.add_argument("--quiet", action="store_true")
+    rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)",
+                        description="Collect the simulated data the paper's experiments need (cached under "
+                                    "--out/data, reused when present), run the inter-foot calibrator in every "
+                                    "configuration (the paper's alternating solver and the default projected one) "
+                                    "and write report.md, report.json and plots beside the paper's numbers.")
+    _out(rp, "reproduce", "reports/reproduction", "report.md, report.json, plots, data/ (the cached session sets)")
+    _quiet(rp)
     rp.set_defaults(func=cmd_reproduce)
 
     _bench_speed_options(sub.add_parser(
         "bench-speed", help="time where users wait (calibration, collection, start-up, the closed loop, the model-gap "
-                            "suite, the tests), the code at hand against a baseline commit in one run"))
+                            "suite, the tests), the code at hand against a baseline commit in one run",
+        description="Install the baseline commit beside the code at hand, run each group's probe once per version "
+                    "per round (alternating which goes first) and write the report (markdown and JSON): per case the "
+                    "medians, the speed-up and whether its target is met."))
 
-    b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report")
-    b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE])
-    b.add_argument("--modes", nargs="+", default=["kinematic", "weld", "contact"])
-    b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--out", default="reports/bench_env", help="report directory (markdown + JSON)")
-    b.add_argument("--quiet", action="store_true")
+    b = sub.add_parser("bench-env", help="measure foot drift per floor mode and collection speed; writes a report",
+                       description="For every robot and floor mode, collect the default session set and report, "
+                                   "from the ground truth, the largest sole drift within any segment (mm, deg) and "
+                                   "the collection speed (frames per wall second, simulated over wall time).")
+    b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE],
+                   help="robots to measure: built-in names or leg-map paths")
+    b.add_argument("--modes", nargs="+", default=["kinematic", "weld", "contact"],
+                   help="floor modes to measure: kinematic, weld, contact")
+    b.add_argument("--seed", type=int, default=0, help="collection seed: an integer in [0, 2^32 - 1]")
+    _out(b, "bench-env", "reports/bench_env", "the report (markdown and JSON)")
+    _quiet(b)
     b.set_defaults(func=cmd_bench_env)
 
     rc = sub.add_parser("robots-check", help="servo gains, stance fit, hold check and recovery of the built-in and "
-                                             "generated test robots (every hip order, soft servos, narrow ankles)")
-    rc.add_argument("--seeds", type=int, default=2, help="seeds per robot and mode (default 2)")
-    rc.add_argument("--extra", nargs="+", default=[G1_EXAMPLE], help=f"more robots (default {G1_EXAMPLE})")
-    rc.add_argument("--out", default="reports/robots_check")
-    rc.add_argument("--quiet", action="store_true")
+                                             "generated test robots (every hip order, soft servos, narrow ankles)",
+                        description="Take every built-in, generated and variation robot through its leg map alone: "
+                                    "the servo gains in use and their source, how much each stance shrank to fit, "
+                                    "the hold check's largest excursions (weld and contact) against its limits, "
+                                    "the weld-mode recovery beside the robot's stiff-servo twin, and the data "
+                                    "checks' false alarms on these clean sets. Writes the report (markdown and JSON).")
+    rc.add_argument("--seeds", type=int, default=2, help="seeds per robot and mode, at least 1 (default 2)")
+    rc.add_argument("--extra", nargs="+", default=[G1_EXAMPLE], help=f"more robots, built-in names or leg-map paths "
+                                                                     f"(default {G1_EXAMPLE})")
+    _out(rc, "robots-check", "reports/robots_check", "the report (markdown and JSON)")
+    _quiet(rc)
     rc.set_defaults(func=cmd_robots_check)
 
     dc = sub.add_parser("data-checks", help="the data checks on clean sets of each robot variation (false alarms) "
-                                            "and the planted defects they catch; writes data_checks.md/.json")
+                                            "and the planted defects they catch; writes data_checks.md/.json",
+                        description="Run the data checks on clean session sets of each robot variation (every "
+                                    "warning there is a false alarm) and on sets with planted defects (frozen "
+                                    "channels, swapped columns, IMU axes, slides ...; each must be caught). Writes "
+                                    "data_checks.md and data_checks.json.")
     dc.add_argument("--robots", nargs="+", default=None,
                     help="variation or generated-robot names, built-ins or leg maps (default: every variation in "
                          "legcal_bench.robots.design.VARIATIONS and the first generated robot)")
-    dc.add_argument("--seeds", nargs="+", type=int, default=list(range(5)), help="collect seeds (default 0-4)")
+    dc.add_argument("--seeds", nargs="+", type=int, default=list(range(5)), help="collect seeds, each an integer in "
+                                                                                 "[0, 2^32 - 1]")
     dc.add_argument("--offsets", nargs="+", default=None,
-                    help="offset specs of the clean sets (default paper random:3: robots_check.CHECK_OFFSETS)")
+                    help="offset specs of the clean sets, e.g. paper, random:3 or one radian per leg joint, "
+                         "comma-separated (default paper random:3: robots_check.CHECK_OFFSETS)")
     dc.add_argument("--modes", nargs="+", default=None, choices=["kinematic", "weld", "contact"],
                     help="floors of the clean sets (default kinematic weld: robots_check.CHECK_MODES)")
     dc.add_argument("--short", action="store_true", help="4 s stances and 1 s standing instead of 12 s and 5 s")
-    dc.add_argument("--no-defects", action="store_true", help="skip the planted defects")
-    dc.add_argument("--out", default="reports/robots_check", help="report directory (default reports/robots_check)")
-    dc.add_argument("--quiet", action="store_true", help="no progress bars")
+    dc.add_argument("--no-defects", action="store_true", help="skip the planted defects (default: planted and "
+                                                              "checked)")
+    _out(dc, "data-checks", "reports/robots_check", "data_checks.md and data_checks.json")
+    _quiet(dc)
     dc.set_defaults(func=cmd_data_checks)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its
     # report module, which loads the simulation.
-    for name, option, seeds, out, func, text in (
+    for name, option, seeds, committed, func, text, description in (
             ("effects-table", "effects", 10, "reports/effects", cmd_effects_table,
              "model gap: for each library effect at a realistic size, the offsets-only fit and the fit with the "
-             "effect added, beside the clean floor"),
+             "effect added, beside the clean floor",
+             "For each robot, library effect (at a realistic size) and seed, collect a session set with the effect "
+             "in the simulation, fit the offsets alone and with the effect added, and tabulate the offsets' error "
+             "(deg) and the effect's estimate beside the clean floor. Writes effects_table.md, .json and .png."),
             ("contact-table", "cases", 5, "reports/contact_check", cmd_contact_table,
              "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
-             "contact floor (flags against the truth)"),
+             "contact floor (flags against the truth)",
+             "Measure the inter-foot calibrator's per-stance contact check on clean data, on sets with a wedge "
+             "under one sole in one stance, and on the contact floor, its flags against the truth. Writes "
+             "contact_table.md and .json."),
             ("contact-floor", "cases", 5, "leaderboard/contact_floor", cmd_contact_floor,
-             "the contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
+             "the contact floor against the weld floor (zero and realistic sensors) and its parts",
+             "The contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
              "sink, tilt and slip, each taken out of the encoders; robustness cases 'contact zero @<key=value>' "
-             "change one of the floor's parameters (timeconst, dampratio, dmin, dmax, friction)"),
+             "change one of the floor's parameters (timeconst, dampratio, dmin, dmax, friction). Writes "
+             "contact_floor.md and .json."),
             ("contact-holds", "cases", 50, "leaderboard/contact_holds", cmd_contact_holds,
              "how many contact sets hold with factory (+-1.2 deg) plus +-3 deg offsets, with and without the "
-             "standing controller (cases: cop none)")):
-        t = sub.add_parser(name, help=text)
+             "standing controller (cases: cop none)",
+             "Count the contact-floor session sets that pass the hold check with factory (+-1.2 deg) plus +-3 deg "
+             "offsets, per robot, with the standing controller (cop) and without it (none). Writes "
+             "contact_holds.md and .json.")):
+        t = sub.add_parser(name, help=text, description=description)
         robots = (["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name in ("contact-floor", "contact-holds")
                   else ["a3", "a2", G1_EXAMPLE])
         if name == "contact-holds":  # the generated robots' names are filled in by the command
@@ -216,25 +271,29 @@ def add_commands(sub) -> None:
                            help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design; "
                                 f"default {' '.join(robots)} and every generated robot)")
         else:
-            t.add_argument("--robots", nargs="+", default=robots,
-                           help=f"built-in names or leg-map paths (default {' '.join(robots)})")
+            t.add_argument("--robots", nargs="+", default=robots, help="built-in names or leg-map paths")
         t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")
-        t.add_argument("--seeds", type=int, default=seeds, help=f"seeds 0..N-1 per robot and case (default {seeds})")
-        t.add_argument("--workers", type=int, default=2, help="local worker processes (default 2)")
-        t.add_argument("--out", default=out, help=f"report directory (default {out})")
-        t.add_argument("--quiet", action="store_true", help="no progress bar")
+        t.add_argument("--seeds", type=int, default=seeds, help="seeds 0..N-1 per robot and case, at least 1")
+        t.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1")
+        _out(t, name, committed, f"{name.replace('-', '_')}.md and .json")
+        _quiet(t)
         if name == "effects-table":
             t.add_argument("--stances", nargs="+", default=None,
                            help="stances to record (default I II III IV; the range stance 'tall' separates the "
                                 "encoder scales from the offsets)")
         t.set_defaults(func=func)
 
-    rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any moved)")
-    rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help=f"fixture JSON (default {DEFAULT_FIXTURE})")
+    rg = sub.add_parser("regression", help="recompute the regression fixture's numbers and compare (exit 1 if any "
+                                           "moved)",
+                        description="Recompute the numbers the regression fixture holds (a subset of the standard "
+                                    "suite's cells and reproduce's zero-noise rows) with the code at hand and list "
+                                    "every value that moved beyond its tolerance (exit 1 if any did). --update "
+                                    "writes the fixture instead, only when numbers are meant to move.")
+    rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help="fixture JSON, read (written only with --update)")
     rg.add_argument("--update", action="store_true",
                     help="write the fixture from the code at hand (only when numbers are meant to move)")
-    rg.add_argument("--workers", type=int, default=2)
-    rg.add_argument("--quiet", action="store_true")
+    rg.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1")
+    _quiet(rg)
     rg.set_defaults(func=cmd_regression)
 
 
@@ -253,8 +312,8 @@ def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
     bs.add_argument("--baseline", default=BASELINE,
                     help=f"commit to compare with (default {BASELINE}, the commit issue #36 measured); none: only "
                          "the code at hand")
-    bs.add_argument("--out", default="reports/bench_speed", help="report directory (report.md, report.json)")
-    bs.add_argument("--quiet", action="store_true", help="no progress lines")
+    _out(bs, "bench-speed", "reports/bench_speed", "the report (markdown and JSON)")
+    bs.add_argument("--quiet", action="store_true", help="no progress lines (default: progress lines)")
     bs.add_argument("--rerender", action="store_true",
                     help="run nothing: write --out's report again from the probe runs its report.json keeps, with "
                          "the labels and targets of the code at hand")

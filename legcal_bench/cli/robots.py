@@ -27,12 +27,16 @@ def door(a: argparse.Namespace, **checks) -> None:
 # Checks `door` takes, beside inputs.seed, inputs.positive, inputs.count, inputs.output_folder, inputs.output_file.
 COUNT0 = partial(inputs.count, low=0)  # a count where none is meaningful
 
+RENDER_OUT = "runs/render/robot.png"
 
-def robot_args(p: argparse.ArgumentParser, default: str | None = "a3") -> None:
+
+def robot_args(p: argparse.ArgumentParser, default: str | None = "a3", unset: str = "") -> None:
+    """--robot (`unset`: what the command does without one, when `default` is None) and --mjcf."""
     p.add_argument("--robot", default=default,
                    help="built-in robot name (a2, a3, pair_ryp, pair_pry) or the path of a leg-map YAML "
-                        f"(default: {default})")
-    p.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names")
+                        f"(default: {default if default is not None else 'none, ' + unset})")
+    p.add_argument("--mjcf", default=None, help="use this MJCF instead of the one the leg map names (default: the "
+                                                "leg map's)")
 
 
 def cmd_info(a: argparse.Namespace) -> int:
@@ -118,16 +122,24 @@ def cmd_render(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    i = sub.add_parser("info", help="list robots, or show one robot's joint order, axes and limits")
-    robot_args(i, default=None)
-    i.add_argument("--json", action="store_true", help="print the robot's description as JSON")
+    i = sub.add_parser("info", help="list robots, or show one robot's joint order, axes and limits",
+                       description="Without --robot: the built-in robots. With --robot: its leg joints in order, "
+                                   "each joint's role, axis in the pelvis frame at q = 0 (and its angle to the "
+                                   "role's axis), limits (deg) and the servo gains static collection uses, the leg "
+                                   "dimensions (m) and any axis warnings. Writes nothing.")
+    robot_args(i, default=None, unset="list the built-in robots")
+    i.add_argument("--json", action="store_true", help="print the robot's description as JSON (default: text)")
     i.set_defaults(func=cmd_info)
 
-    r = sub.add_parser("render", help="PNG of a robot in a stance (offscreen)")
+    r = sub.add_parser("render", help="PNG of a robot in a stance (offscreen)",
+                       description="Place the robot in a stance on the static env (no offsets, zero-noise "
+                                   "sensors), render it offscreen (MuJoCo, MUJOCO_GL=egl by default) and write a "
+                                   "PNG.")
     robot_args(r)
-    r.add_argument("--stance", default="I", help="I, II, III, IV or standing (default I)")
+    r.add_argument("--stance", default="I", help="the stance to show: I, II, III, IV or standing (default I)")
     r.add_argument("--mode", default="kinematic", choices=("kinematic", "weld", "contact"),
                    help="floor model (default kinematic)")
-    r.add_argument("--seed", type=int, default=0, help="placement seed (default 0)")
-    r.add_argument("--out", default="robot.png", help="PNG file to write (default robot.png)")
+    r.add_argument("--seed", type=int, default=0, help="placement seed: an integer in [0, 2^32 - 1] (default 0)")
+    r.add_argument("--out", default=RENDER_OUT, help=f"PNG file to write, its folder made if needed (default "
+                                                     f"{RENDER_OUT})")
     r.set_defaults(func=cmd_render)

@@ -14,6 +14,8 @@ from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
 
 SENSORS = partial(inputs.choice, options=SENSOR_PRESET_NAMES)
+WALK_EVAL_OUT = "runs/walk-eval"
+TRAIN_OUT = "runs/train-policy"  # + /<robot>
 
 
 def _correction(path, legmap):
@@ -191,7 +193,6 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
 
     from legcal_bench.evaluation.distill import DistillConfig, export, train  # the training module's (tests shorten it)
     from legcal_bench.files.atomic import atomic_write_json, atomic_write_text, replace_dir
-    from legcal_bench.policies.spec import WALKERS_DIR
     from legcal_bench.policies.zmp_walker import TEACHERS_DIR, load_teacher_recipe
     from legcal_bench.provenance import code_version, describe
     from legcal_bench.robots import BUILTIN, load_robot
@@ -207,7 +208,7 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
     cfg = DistillConfig(iterations=a.iterations, rollouts=a.rollouts, offsets_deg=a.offsets_deg, seed=a.seed,
                         eval_rollouts=a.selection_walks)
     name = a.name or f"legcal_{legmap.name}_walker"
-    out = Path(a.out or WALKERS_DIR / str(a.robot))
+    out = Path(a.out or Path(TRAIN_OUT) / legmap.name)  # the shipped policies change only when --out names them
     made_by = (f"legcal-bench train-policy --robot {a.robot} --teacher {teacher} --iterations {a.iterations} "
                f"--rollouts {a.rollouts} --offsets-deg {a.offsets_deg:g} --selection-walks {a.selection_walks} "
                f"--seed {a.seed}")
@@ -243,19 +244,33 @@ def cmd_train_policy(a: argparse.Namespace) -> int:
 
 
 def add_commands(sub) -> None:
-    _walk_options(sub.add_parser("walk", help="a policy (from its spec) walking a robot, with encoder offsets and "
-                                              "an optional correction: one walk, or paired trials against the "
-                                              "nominal walk"))
+    _walk_options(sub.add_parser(
+        "walk", help="a policy (from its spec) walking a robot, with encoder offsets and an optional correction: one "
+                     "walk, or paired trials against the nominal walk",
+        description="Walk a policy (a spec YAML or one of our walkers' names) or the model-based teacher on the "
+                    "walking env, with encoder offsets injected and, optionally, a calibration result's correction "
+                    "applied as the robot applies it. One walk prints whether it stayed upright (or when it fell), "
+                    "the distance, foot strikes, torque and power; --trials N walks N paired seeds, nominal and "
+                    "with offsets, and prints upright counts and the pelvis and foot-strike deviations (mm). "
+                    "Writes a file only when --out or --strip names one."))
     e = sub.add_parser("walk-eval", help="the closed-loop evaluation: per trial a static calibration with the same "
-                                         "offsets, then nominal, uncorrected, corrected and oracle walks")
+                                         "offsets, then nominal, uncorrected, corrected and oracle walks",
+                       description="Evaluate a calibrator in the closed loop: per trial, collect a static session "
+                                   "set with the trial's offsets, calibrate it, then walk the policy four times "
+                                   "(nominal, with the offsets uncorrected, corrected by the estimate, corrected "
+                                   "by the truth). Writes report.md, report.json, paths.png and timings.json into "
+                                   "--out, each finished trial in its trials/ folder (a rerun into it resumes). "
+                                   "To update the committed report, name it: --out reports/walk_eval.")
     robot_args(e)
-    e.add_argument("--policy", required=True, help="policy spec YAML")
+    e.add_argument("--policy", required=True, help="policy spec YAML, or our policy's name (a3, a2)")
     e.add_argument("--offsets", default="paper@3", help="paper@<deg> (the paper's signs, every joint), random:<deg> "
                                                         "(a pattern per trial: trial s draws from seed 20000 + s), "
                                                         "random:<deg>@<seed> (the same, trial s from seed <seed> + s), "
-                                                        "or one radian per leg joint, comma-separated")
-    e.add_argument("--sweep", type=float, nargs="+", default=None, help="magnitudes (deg, > 0) to sweep, e.g. 1 2 3 "
-                                                                        "(replacing <deg> of paper@ or random:)")
+                                                        "or one radian per leg joint, comma-separated (e.g. "
+                                                        "-0.02,0.01,...)")
+    e.add_argument("--sweep", type=float, nargs="+", default=None, metavar="DEG",
+                   help="magnitudes (deg, > 0) to sweep, e.g. 1 2 3 (replacing <deg> of paper@ or random:; default: "
+                        "no sweep, --offsets as given)")
     e.add_argument("--trials", type=int, default=35, help="trials per offsets magnitude, at least 1 (default 35)")
     e.add_argument("--seconds", type=float, default=20.0, help="seconds of each walk, > 0 (default 20)")
     e.add_argument("--calibrator", default="interfoot", help="registered calibrator of the static calibration "
@@ -263,7 +278,8 @@ def add_commands(sub) -> None:
     e.add_argument("--setting", default=None, help="the calibrator's setting (default: its sensor-matched variant "
                                                    "where it has one)")
     e.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
-                   help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 (repeatable)")
+                   help="a calibrator option, typed by its constructor, e.g. --option lambda_q=0.1 (repeatable; "
+                        "default: none, the calibrator's defaults)")
     e.add_argument("--static-sensors", default="calibrated-imu", help="sensors of the static session sets "
                                                                       "(default calibrated-imu; also realistic)")
     e.add_argument("--sensors", default="realistic", help=f"sensors while walking: {', '.join(SENSOR_PRESET_NAMES)} "
@@ -271,41 +287,52 @@ def add_commands(sub) -> None:
     e.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2; 1 runs "
                                                           "here)")
     e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786), checked reachable "
-                                                     "before any trial")
-    e.add_argument("--out", default="reports/walk_eval", help="report folder (report.md, report.json, paths.png, "
-                                                                "timings.json) with each finished trial in "
-                                                                "trials/; rerun into it to resume an interrupted run")
-    e.add_argument("--quiet", action="store_true", help="no progress bar")
+                                                     "before any trial (default: none, local worker processes)")
+    e.add_argument("--out", default=WALK_EVAL_OUT,
+                   help=f"report folder (report.md, report.json, paths.png, timings.json) with each finished trial in "
+                        f"trials/; rerun into it to resume an interrupted run (default {WALK_EVAL_OUT}; the committed "
+                        f"report changes only when named: --out reports/walk_eval)")
+    e.add_argument("--quiet", action="store_true", help="no progress bar (default: a progress bar)")
     e.set_defaults(func=cmd_walk_eval, resume="the finished trials are kept in --out's trials/; rerun the same "
                                              "command into it to resume")
 
-    _train_policy_options(sub.add_parser("train-policy", help="train our walking policy from scratch: the "
-                                                              "model-based teacher (ZMP preview gait + IMU balance "
-                                                              "feedback) distilled into an MLP by behaviour cloning "
-                                                              "and DAgger, checkpoint chosen by rollout success"))
+    _train_policy_options(sub.add_parser(
+        "train-policy", help="train our walking policy from scratch: the model-based teacher (ZMP preview gait + IMU "
+                             "balance feedback) distilled into an MLP by behaviour cloning and DAgger, checkpoint "
+                             "chosen by rollout success",
+        description="Distil the robot's model-based teacher (a ZMP preview gait with IMU balance feedback, from its "
+                    "recipe) into an MLP policy: behaviour cloning, then DAgger iterations on rollouts with random "
+                    "offsets, floor friction and masses; the checkpoint is chosen by how many selection walks stay "
+                    "upright. Writes policy.yaml (TorchScript), policy.onnx.yaml (ONNX), the teacher recipe, "
+                    "train.log and training.json into --out. The shipped policies (policies/walkers/<robot>) change "
+                    "only when --out names their folder."))
 
 
 def _walk_options(w: argparse.ArgumentParser) -> None:
     robot_args(w)
     w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
-                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2)")
+                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2); "
+                                                  "no default: give --policy or --teacher")
     w.add_argument("--teacher", default=None, help="instead of a policy: the model-based teacher from its recipe "
-                                                   "(e.g. policies/teachers/a3.yaml)")
+                                                   "(e.g. policies/teachers/a3.yaml; default: none, --policy)")
     w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "
-                                                     "random:<deg> draws one pattern per seed")
+                                                     "random:<deg> draws one pattern per seed; a list of radians "
+                                                     "reads e.g. -0.02,0.01,...")
     w.add_argument("--correction", default=None, help="a calibration result JSON of this robot: its offsets are "
-                                                      "applied as the robot applies them (q_enc + dq_hat)")
+                                                      "applied as the robot applies them (q_enc + dq_hat; default: "
+                                                      "none, uncorrected)")
     w.add_argument("--seconds", type=float, default=20.0, help="seconds to walk, > 0 (default 20)")
     w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk): an integer in "
                                                        "[0, 2^32 - 1] (default 0)")
     w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets "
                                                          "(default 0: one walk)")
     w.add_argument("--sensors", default="realistic", help=f"sensor preset: {', '.join(SENSOR_PRESET_NAMES)}")
-    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG file)")
+    w.add_argument("--strip", default=None, help="write an image strip of the walk (PNG file; default: none "
+                                                 "drawn)")
     w.add_argument("--strip-every", type=float, default=2.0, help="seconds between strip frames, > 0 (default 2)")
     w.add_argument("--out", default=None, help="write the walk (or trials) as JSON (a file; checked writable before "
-                                               "the walk)")
-    w.add_argument("--json", action="store_true", help="print the summary as JSON")
+                                               "the walk; default: none written)")
+    w.add_argument("--json", action="store_true", help="print the summary as JSON (default: text)")
     w.set_defaults(func=cmd_walk)
 
 
@@ -314,17 +341,19 @@ def _train_policy_options(t: argparse.ArgumentParser) -> None:
     t.add_argument("--teacher", default=None, help="teacher recipe YAML (format legcal-teacher/1; default: "
                                                    "policies/teachers/<robot>.yaml for a built-in robot)")
     t.add_argument("--iterations", type=int, default=DistillConfig.iterations,
-                   help="DAgger iterations (the first is behaviour cloning)")
+                   help="DAgger iterations, at least 1 (the first is behaviour cloning)")
     t.add_argument("--rollouts", type=int, default=DistillConfig.rollouts,
-                   help=f"{DistillConfig.seconds:g} s rollouts per iteration")
+                   help=f"{DistillConfig.seconds:g} s rollouts per iteration, at least 1")
     t.add_argument("--offsets-deg", type=float, default=DistillConfig.offsets_deg,
-                   help="training offsets: uniform +- this per joint")
+                   help="training offsets, deg: uniform +- this per joint, >= 0")
     t.add_argument("--selection-walks", type=int, default=DistillConfig.eval_rollouts,
                    help="random offset patterns (besides none and paper@3) the pure student walks after each "
                         f"iteration to choose the checkpoint (default {DistillConfig.eval_rollouts})")
-    t.add_argument("--seed", type=int, default=0, help="training seed (default 0)")
-    t.add_argument("--name", default=None, help="the policy's name in its spec")
-    t.add_argument("--out", default=None, help="output folder (default policies/walkers/<robot>); replaced only "
-                                               "if it holds an earlier training result")
-    t.add_argument("--quiet", action="store_true", help="no progress output")
+    t.add_argument("--seed", type=int, default=0, help="training seed: an integer in [0, 2^32 - 1] (default 0)")
+    t.add_argument("--name", default=None, help="the policy's name in its spec (default: legcal_<robot>_walker)")
+    t.add_argument("--out", default=None,
+                   help=f"output folder, replaced only if it holds an earlier training result (default "
+                        f"{TRAIN_OUT}/<robot>; the shipped policy changes only when named: --out "
+                        f"policies/walkers/<robot>)")
+    t.add_argument("--quiet", action="store_true", help="no progress output (default: a line per iteration)")
     t.set_defaults(func=cmd_train_policy)

@@ -79,6 +79,32 @@ def atomic_write_json(path: str | Path, obj: Any) -> Path:
     return atomic_write_text(path, json.dumps(obj, indent=2, sort_keys=True) + "\n")
 
 
+def rows_json(obj: Any) -> str:
+    """`obj` as JSON a row per line: each key of a top-level dict on its own line, each
+    item of a top-level list (or of a list under a top-level key) on its own line,
+    compact within (no indentation: a report's rows without the bulk indenting adds,
+    still one row per line in a diff). Keys sorted; `json.loads` gives `obj` back."""
+    def one(o: Any) -> str:
+        return json.dumps(o, sort_keys=True, separators=(",", ":"))
+
+    def items(xs: list) -> list[str]:
+        return [one(x) + ("," if i < len(xs) - 1 else "") for i, x in enumerate(xs)]
+
+    if isinstance(obj, list) and obj:
+        return "\n".join(["[", *items(obj), "]"]) + "\n"
+    if not isinstance(obj, dict) or not obj:
+        return one(obj) + "\n"
+    lines = ["{"]
+    keys = sorted(obj)
+    for i, k in enumerate(keys):
+        v, end = obj[k], "," if i < len(keys) - 1 else ""
+        if isinstance(v, list) and v:
+            lines += [f"{one(k)}:[", *items(v), "]" + end]
+        else:
+            lines.append(f"{one(k)}:{one(v)}{end}")
+    return "\n".join(lines + ["}"]) + "\n"
+
+
 def atomic_write_dir(path: str | Path, write: Callable[[Path], None]) -> Path:
     """Call `write(folder)` on a temporary folder beside `path`, then rename it to `path`
     (which must not exist): the folder appears whole or not at all."""

@@ -188,7 +188,9 @@ def _paths(w: _Where, d: dict, key: str, name: str, default, table: bool, n: int
 def load_mapping(path: str | Path, legmap: LegMap, table: bool) -> LogMapping:
     """Read and check the mapping file for `legmap`; `table`: the log is CSV/Parquet
     (columns) rather than bags (topics and field paths)."""
-    path = Path(path)
+    from legcal_bench.files.packaged import packaged
+
+    path = packaged(path)  # the one rule for a file a user names
     if not path.exists():
         raise LogImportError(f"--map {path}: no such file; write one from docs/log-import.md "
                              "(`legcal-bench import --example-map` prints a commented example)")

@@ -509,7 +509,10 @@ def load_protocol(path) -> dict[str, Stance]:
     from legcal_bench.errors import ConfigError
     from legcal_bench.inputs import known_keys, read_text
 
+    from legcal_bench.files.packaged import packaged
+
     fix = "write one with legcal-bench design --out"
+    path = packaged(path)  # the one rule for a file a user names
     try:
         text = read_text("protocol", path, "protocol file")
     except ConfigError as e:

@@ -3,7 +3,7 @@ the package, and any robot by the path of its leg map.
 
 A robot reference ("spec") is a built-in name (`a3`), a leg-map path, or
 `examples/<file>.legmap.yaml` (found in the working directory first, then among the
-installed examples). `resolve_robot` turns a spec into a reference that works from any
+installed examples: `legcal_bench.files.packaged`, the rule for every file a user names). `resolve_robot` turns a spec into a reference that works from any
 folder (the name, or an absolute path); `robot_label` gives its short name.
 """
 
@@ -13,17 +13,11 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from legcal_bench.errors import LegMapError, MissingModelError
+from legcal_bench.files.packaged import packaged
 from legcal_bench.robots.legmap import LegMap, load_legmap
 
 ASSETS = Path(__file__).parent / "assets"
 LEGMAP_SUFFIXES = (".legmap.yaml", ".yaml", ".yml")
-
-
-def examples_dir() -> Path:
-    """Where the example leg maps are (a checkout's `examples/`, or the installed copy)."""
-    import legcal_bench.examples
-
-    return Path(legcal_bench.examples.__file__).parent
 
 
 @dataclass(frozen=True)
@@ -69,11 +63,9 @@ def resolve_robot(spec: str | Path) -> str:
     s = str(spec)
     if s in BUILTIN:
         return s
-    p = Path(s)
+    p = packaged(s)  # a path from the working directory, else an installed example
     if p.is_file():
         return str(p.resolve())
-    if p.parts[:1] == ("examples",) and len(p.parts) == 2 and (examples_dir() / p.name).is_file():
-        return str((examples_dir() / p.name).resolve())
     if s.endswith(LEGMAP_SUFFIXES):
         raise LegMapError(f"leg map {p.resolve()} does not exist")
     raise LegMapError(f"unknown robot {s!r}: use a built-in name ({', '.join(BUILTIN)}) "

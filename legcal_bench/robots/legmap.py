@@ -242,8 +242,11 @@ def _model_path(data: dict, kind: str, base_dir: Path, where: str) -> Path:
     if model.is_dir():
         raise LegMapError(f"{where}: field '{kind}' points to {model}, which is a folder; give the {what} file itself")
     if not model.is_file():
+        from legcal_bench.files.packaged import EXTERNAL_HINT, from_examples
+
         raise MissingModelError(f"{where}: field '{kind}' points to {model}, which does not exist; "
-                                "give a path relative to the leg map or an absolute path")
+                                + (EXTERNAL_HINT if from_examples(base_dir / "x") else
+                                   "give a path relative to the leg map or an absolute path"))
     return model
 
 

@@ -84,7 +84,8 @@ def test_unknown_robot_name():
 
 
 def test_example_robots_resolve_from_any_folder(tmp_path, monkeypatch):
-    from legcal_bench.robots import examples_dir, resolve_robot, robot_label
+    from legcal_bench.files.packaged import examples_dir
+    from legcal_bench.robots import resolve_robot, robot_label
 
     monkeypatch.chdir(tmp_path)  # not a checkout: examples/ must come from the package
     ref = resolve_robot("examples/unitree_g1.legmap.yaml")

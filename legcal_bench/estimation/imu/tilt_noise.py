@@ -2,7 +2,7 @@
 
 The declared tilt noise is the accelerometer's white noise over g. On a moving posture
 the motion compensation (`imu_motion.compensate`) leaves an error of its own at 1-3 Hz
-(on the G1's weld sets 1.03-1.06x the declared sigma: `reports/modelgap/tilt_scatter.py`),
+(on the G1's weld sets 1.03-1.06x the declared sigma: `reports/modelgap/tilt_scatter.md`),
 which the declared noise does not hold and which a chi-square test over ~10^4 degrees
 of freedom sees. No truth is needed to measure it: the pelvis tilts on a ~10 s scale, so
 the compensated vertical's scatter about its own smooth course (a quadratic

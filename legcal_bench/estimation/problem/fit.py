@@ -263,7 +263,7 @@ REFINE_TOL = 1e-3  # converged when every step is below this fraction of its par
 # per degree of freedom above this at the solution: the declared noise explains less
 # than 2/3 of the residual's variance), the row-weighted fit is kept: the frames the
 # whitening trusts most are those an unmodelled error spoils most. Measured on the full
-# suite's datasets (`reports/gls/gls_holds.py`, seeds 0-5, three robots): chi2/dof
+# suite's datasets (`reports/gls/gls_holds.md`, seeds 0-5, three robots): chi2/dof
 # 0.92-1.19 on every weld set, where the row-weighted fit's offsets error is 0.93-1.6x
 # the whitened fit's (A2-like 1.1-1.6x); 2.2-129 on every contact set (soles rocking and
 # sinking under load), where the whitened fit's is 1.0-2.7x the row-weighted's. A
