@@ -137,31 +137,82 @@ def argv_in(bin_dir: Path, argv: list[str]) -> list[str]:
     raise ValueError(f"a documented command this test does not know how to run: {shlex.join(argv)}")
 
 
+# Runs a list of legcal-bench commands in one interpreter of the installed environment,
+# as `legcal-bench ARGS` would one by one (`legcal_bench.cli.main`): each command's exit
+# code and printed output, stopping at the first that fails. One start-up (torch, MuJoCo,
+# Pinocchio) per run of consecutive commands instead of one per command.
+DRIVER = """import contextlib, io, json, sys, traceback
+from legcal_bench.cli import main
+steps, out = json.load(open(sys.argv[1])), []
+for argv in steps:
+    buf, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(buf), contextlib.redirect_stderr(err):
+        try:
+            rc = main(argv)
+        except SystemExit as e:
+            rc = e.code if isinstance(e.code, int) else 2
+        except BaseException:
+            rc, _ = 1, traceback.print_exc()
+    out.append({"rc": rc, "out": buf.getvalue(), "err": err.getvalue()})
+    json.dump(out, open(sys.argv[2], "w"))
+    if rc != 0:
+        break
+"""
+
+
 def run_document(document: str, bin_dir: Path, work: Path, timeout: float = 600) -> list[tuple[str, str]]:
     """Run every snippet of `document` in order in `work` (a fresh folder: the commands'
-    relative paths start there; docs/examples/ is copied in, as a checkout has it).
-    Returns (command, its output) of each; raises AssertionError naming the command
-    that failed, with its output."""
+    relative paths start there; docs/examples/ is copied in, as a checkout has it):
+    consecutive `legcal-bench` commands in one interpreter of the installed environment
+    (`DRIVER`), python blocks as scripts, pytest and pip as their own processes. Returns
+    (command, its output) of each; raises AssertionError naming the command that failed,
+    with its output."""
+    import json
+
     if (REPO / "docs" / "examples").is_dir():
         shutil.copytree(REPO / "docs" / "examples", work / "docs" / "examples",
                         ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "build"))
     env = environment(bin_dir)
-    done = []
+    (work / "_commands.py").write_text(DRIVER)
+    steps: list[tuple[str, list[str], list[str]]] = []  # (how, argv, quoted output)
     for i, s in enumerate(snippets(document)):
         if s.not_run:
             continue
         if s.kind == "python":
             script = work / f"snippet_{i}.py"
             script.write_text(s.text)
-            runs = [([str(bin_dir / "python"), script.name], [])]
+            steps.append(("process", [str(bin_dir / "python"), script.name], []))
         else:
-            runs = [(argv_in(bin_dir, argv), quoted) for argv, quoted in s.commands()]
-        for argv, quoted in runs:
+            steps += [("cli", argv[1:], quoted) if argv[0] == "legcal-bench" else
+                      ("process", argv_in(bin_dir, argv), quoted) for argv, quoted in s.commands()]
+    done = []
+
+    def check(shown: str, rc: int, out: str, err: str, quoted: list[str]) -> None:
+        assert rc == 0, f"{document}: `{shown}` exited {rc}:\n{(out + err)[-3000:]}"
+        for line in quoted:  # the words the page quotes, not its figures
+            head = re.split(r"[\d(]", line, maxsplit=1)[0].strip()
+            assert head in out, f"{document}: `{shown}` did not print {head!r}:\n{out[-2000:]}"
+        done.append((shown, out))
+
+    k = 0
+    while k < len(steps):
+        how, argv, quoted = steps[k]
+        if how == "process":
             r = subprocess.run(argv, cwd=work, env=env, capture_output=True, text=True, timeout=timeout)
-            shown = shlex.join(argv)
-            assert r.returncode == 0, f"{document}: `{shown}` exited {r.returncode}:\n{(r.stdout + r.stderr)[-3000:]}"
-            for line in quoted:  # the words the page quotes, not its figures
-                head = re.split(r"[\d(]", line, maxsplit=1)[0].strip()
-                assert head in r.stdout, f"{document}: `{shown}` did not print {head!r}:\n{r.stdout[-2000:]}"
-            done.append((shown, r.stdout))
+            check(shlex.join(argv), r.returncode, r.stdout, r.stderr, quoted)
+            k += 1
+            continue
+        run = [k]
+        while run[-1] + 1 < len(steps) and steps[run[-1] + 1][0] == "cli":
+            run.append(run[-1] + 1)
+        (work / "_steps.json").write_text(json.dumps([steps[j][1] for j in run]))
+        r = subprocess.run([str(bin_dir / "python"), "_commands.py", "_steps.json", "_results.json"], cwd=work,
+                           env=env, capture_output=True, text=True, timeout=timeout)
+        results = json.loads((work / "_results.json").read_text()) if (work / "_results.json").is_file() else []
+        (work / "_results.json").unlink(missing_ok=True)
+        for j, res in zip(run, results):
+            check("legcal-bench " + shlex.join(steps[j][1]), res["rc"], res["out"], res["err"], steps[j][2])
+        assert len(results) == len(run), (f"{document}: the commands' interpreter ended after {len(results)} of "
+                                          f"{len(run)} (exit {r.returncode}):\n{(r.stdout + r.stderr)[-3000:]}")
+        k = run[-1] + 1
     return done

@@ -17,6 +17,9 @@ import pytest
 from tests.docs import snippets as sn
 
 RUN = [d for d in sn.DOCUMENTS if any(not s.not_run for s in sn.snippets(d))]
+# The guides whose commands repeat the README's paths at more length (a suite, two
+# closed-loop evaluations): `make test-slow` runs them, keeping `make test` in its budget.
+SLOW = ("docs/guides/benchmark.md", "docs/guides/closed-loop.md")
 
 
 @pytest.fixture(scope="module")
@@ -54,9 +57,13 @@ def test_the_wheel_carries_the_policies_recipes_and_examples(installed):
                            capture_output=True, text=True, check=True, cwd=installed.parent,
                            env=sn.environment(installed)).stdout
     assert where.startswith(str(installed.parent)), where  # the wheel's copy, not the checkout's
+    # The console script (the snippets' commands run through legcal_bench.cli.main, as it does).
+    top = subprocess.run([str(installed / "legcal-bench"), "--help"], capture_output=True, text=True, check=True,
+                         cwd=installed.parent, env=sn.environment(installed)).stdout
+    assert "calibrate a robot" in top and "maintainers: reports" in top, top
 
 
-@pytest.mark.parametrize("document", RUN)
+@pytest.mark.parametrize("document", [pytest.param(d, marks=pytest.mark.slow) if d in SLOW else d for d in RUN])
 def test_the_documents_snippets_run_against_the_installed_wheel(document, installed, tmp_path):
     outputs = sn.run_document(document, installed, tmp_path)
     check = CHECKS.get(document)
