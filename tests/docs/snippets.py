@@ -169,6 +169,7 @@ def run_document(document: str, bin_dir: Path, work: Path, timeout: float = 600)
     with its output."""
     import json
 
+    work.mkdir(parents=True, exist_ok=True)
     if (REPO / "docs" / "examples").is_dir():
         shutil.copytree(REPO / "docs" / "examples", work / "docs" / "examples",
                         ignore=shutil.ignore_patterns("__pycache__", "*.egg-info", "build"))

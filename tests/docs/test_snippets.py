@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -18,15 +19,38 @@ from tests.docs import snippets as sn
 
 RUN = [d for d in sn.DOCUMENTS if any(not s.not_run for s in sn.snippets(d))]
 # The guides whose commands repeat the README's paths at more length (a suite, two
-# closed-loop evaluations): `make test-slow` runs them, keeping `make test` in its budget.
-SLOW = ("docs/guides/benchmark.md", "docs/guides/closed-loop.md")
+# closed-loop evaluations, the envs' smoke test and examples): `make test-slow` runs
+# them, keeping `make test` in its budget.
+SLOW = ("docs/guides/benchmark.md", "docs/guides/closed-loop.md", "docs/guides/envs.md")
 
 
 @pytest.fixture(scope="module")
 def installed(tmp_path_factory) -> Path:
-    """The wheel and its environment, built once per test process (about 3 s)."""
-    work = tmp_path_factory.mktemp("wheel")
-    return sn.install(sn.build_wheel(work), work / "venv")
+    """The wheel and an environment with it (its bin/), built once per test run (about
+    3 s): the first test process builds them under the run's shared temporary folder,
+    holding a lock, and the others use them. A document that installs a package (`pip
+    install`) gets an environment of its own (`_environment_for`)."""
+    import fcntl
+
+    shared = tmp_path_factory.getbasetemp().parent  # the run's folder (each xdist process has one below it)
+    work = shared / "wheel"
+    with open(shared / "wheel.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (work / "venv" / "bin" / "legcal-bench").is_file():
+            shutil.rmtree(work, ignore_errors=True)
+            work.mkdir()
+            sn.install(sn.build_wheel(work), work / "venv")
+    return work / "venv" / "bin"
+
+
+def _environment_for(document: str, installed: Path, tmp_path: Path) -> Path:
+    """The shared environment, or a fresh one with the same wheel for a document that
+    installs a package into it (the effect plug-in guide's `pip install -e`)."""
+    if not any(argv[0] == "pip" for s in sn.snippets(document) if not s.not_run and s.kind != "python"
+               for argv, _ in s.commands()):
+        return installed
+    wheel = next((installed.parent.parent / "dist").glob("legcal_bench-*.whl"))
+    return sn.install(wheel, tmp_path / "venv")
 
 
 def test_every_runnable_block_runs_or_says_why_not():
@@ -65,10 +89,10 @@ def test_the_wheel_carries_the_policies_recipes_and_examples(installed):
 
 @pytest.mark.parametrize("document", [pytest.param(d, marks=pytest.mark.slow) if d in SLOW else d for d in RUN])
 def test_the_documents_snippets_run_against_the_installed_wheel(document, installed, tmp_path):
-    outputs = sn.run_document(document, installed, tmp_path)
+    outputs = sn.run_document(document, _environment_for(document, installed, tmp_path), tmp_path / "work")
     check = CHECKS.get(document)
     if check is not None:
-        check(tmp_path, "\n".join(out for _, out in outputs))
+        check(tmp_path / "work", "\n".join(out for _, out in outputs))
 
 
 # ----------------------------------------------------------- each document's own checks

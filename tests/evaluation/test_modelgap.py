@@ -308,7 +308,7 @@ def test_a_sparse_description_another_explains_as_well_is_said_not_unique(tmp_pa
     spec, side = outside_spec("shank_twisted", 3, robot="a3")
     lm = load_robot("a3")
     collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=3, heldout=0, effects=(spec,),
-                          stance_s=6.0), tmp_path / "set", progress=False)
+                          stance_s=4.0), tmp_path / "set", progress=False)
     rep = diagnose(lm, load_session(tmp_path / "set", robot=lm), effects=())  # the geometry alone: no library fits
     assert rep["recommended"] == "sparse geometry"
     (tie,) = rep["generic"]["sparse_ties"]
