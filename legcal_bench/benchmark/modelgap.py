@@ -242,6 +242,16 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
             return None
         return float(np.rad2deg(rms(np.array([offsets[n] for n in names]) - injected)))
 
+    def distance(c: dict) -> dict | None:
+        """The Mahalanobis distance of a candidate's offsets error under the covariance
+        the diagnosis states for them (squared; the covariance's rank its dof)."""
+        if not c.get("offsets_rad") or c.get("offsets_cov_rad2") is None:
+            return None
+        e = np.array([c["offsets_rad"][n] for n in names]) - injected
+        w, V = np.linalg.eigh(np.asarray(c["offsets_cov_rad2"], dtype=float))
+        keep = w > w.max() * 1e-12
+        return {"d2": float(np.sum((V[:, keep].T @ e) ** 2 / w[keep])), "dof": int(keep.sum())}
+
     # Every candidate estimate (offsets only, each admissible fit, the generic geometric
     # fit) with its error against the truth, and the one recommended (the diagnosis's
     # cross-validated choice; reports made before #41's candidates have none).
@@ -249,6 +259,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
               "offsets_rms_deg": err(c.get("offsets_rad")), "cv_chi2": c.get("cv_chi2"),
               "offsets_std_rms_deg": (None if c.get("offsets_std_rms_rad") is None
                                       else float(np.rad2deg(c["offsets_std_rms_rad"]))),
+              "offsets_distance": distance(c),
               "admissible": c.get("admissible"), "recommended": bool(c.get("recommended")),
               "set_aside": c.get("set_aside")} for c in rep.get("candidates") or ()]
     row.update(verdict=rep["verdict"], selected=rep["selected"], poor_fit=rep["poor_fit"],
@@ -586,6 +597,7 @@ def done_when(rows: list[dict]) -> dict:
                                    "recommended": r.get("recommended"), "offsets_rms_deg": _recommended(r),
                                    "over_floor": _recommended(r) / floor, "summary": r.get("summary", ""),
                                    "stated_noise_deg": _stated_noise(r), "within_stated_noise": _within_noise(r),
+                                   "stated_distance": _stated_distance(r),
                                    "clean_same_seed_deg": clean_seed.get(r["seed"]),
                                    "says_why": (CONFOUNDED_OFFSETS in r.get("summary", "")
                                                 or NOT_UNIQUE in r.get("summary", "") or _within_noise(r))})
@@ -649,6 +661,13 @@ def _recommended(r: dict) -> float:
     return o["after"] if r["selected"] else o["before"]
 
 
+def _stated_distance(r: dict) -> dict | None:
+    """The recommended offsets' error's Mahalanobis distance under their stated covariance
+    (`run_case`'s `offsets_distance`); None on rows made before it was recorded."""
+    rec = next((c for c in r.get("candidates") or () if c.get("recommended")), None)
+    return None if rec is None else rec.get("offsets_distance")
+
+
 def _stated_noise(r: dict) -> float | None:
     """The noise (RMS of the offsets' stds, deg) the diagnosis states for the offsets it
     recommends; None on rows made before it was recorded."""
@@ -656,19 +675,20 @@ def _stated_noise(r: dict) -> float | None:
     return None if rec is None else rec.get("offsets_std_rms_deg")
 
 
-NOISE_QUANTILE = 0.99  # an error is within its stated noise below this quantile of the RMS of that noise
+NOISE_QUANTILE = 0.99  # an error is within its stated noise below this quantile of its distance
 
 
 def _within_noise(r: dict) -> bool:
-    """Whether a row's recommended offsets' error is what their stated noise allows: the
-    RMS of `joints` errors each of the stated std is below sqrt(chi2_q(joints)/joints)
-    times the stated RMS std at NOISE_QUANTILE."""
+    """Whether a row's recommended offsets' error is what the covariance the diagnosis
+    states for them allows: its squared Mahalanobis distance under that covariance
+    (`run_case`'s `offsets_distance`) below the chi-square quantile NOISE_QUANTILE of the
+    covariance's rank. Rows made before the covariance was stated: never."""
     from scipy.stats import chi2
 
-    sd, n = _stated_noise(r), r.get("joints")
-    if not sd or not n:
+    dist = _stated_distance(r)
+    if not dist or not dist["dof"]:
         return False
-    return bool(_recommended(r) <= sd * np.sqrt(chi2.ppf(NOISE_QUANTILE, n) / n))
+    return bool(dist["d2"] <= chi2.ppf(NOISE_QUANTILE, dist["dof"]))
 
 
 def _cell(x, nd: int) -> str:
@@ -733,13 +753,21 @@ def markdown(data: dict, made_by: str, code: str) -> str:
     return "\n".join(L) + "\n"
 
 
+def _distance_text(b: dict) -> str:
+    from scipy.stats import chi2
+
+    d = b.get("stated_distance")
+    return "" if not d else (f", the error's squared Mahalanobis distance under its covariance {d['d2']:.1f} on "
+                             f"{d['dof']} dof ({NOISE_QUANTILE:.0%}: {chi2.ppf(NOISE_QUANTILE, d['dof']):.1f})")
+
+
 def done_when_markdown(dw: dict) -> list[str]:
-    """Issue #41's done-when statistics (`done_when`) in words and tables."""
+    """The suite's bars (`done_when`'s statistics) in words and tables."""
     def met(x) -> str:
         return "–" if x is None else ("met" if x else "NOT met")
 
     t, robots = dw["totals"], dw["robots"]
-    L = ["### Issue #41's done-when", ""]
+    L = ["### The suite's bars: no wrong name, offsets near the clean floor, attribution", ""]
     if t["outside"]:
         share = "–" if t["within_share"] is None else f"{t['within_share']:.0%}"
         L += [f"- Outside the library: {t['edits']} edits x {t['robots_with_outside']} robots, at least "
@@ -749,8 +777,9 @@ def done_when_markdown(dw: dict) -> list[str]:
               f"- Recommended offsets within {FLOOR_FACTOR:g}x the robot's clean floor: {t['within']}/{t['scored']} "
               f"({share}; asked: {WITHIN_SHARE:.0%}): {met(t['within_met'])}; of the {t['beyond']} beyond, "
               f"{t['beyond_say_why']} say why (the verdict says the change it adds is partly confounded with the "
-              f"offsets, or that the sparse description is not unique, or the error is within the noise it states "
-              f"for the offsets at {NOISE_QUANTILE:.0%})."]
+              f"offsets, or that the sparse description is not unique, or the error is within the covariance it "
+              f"states for the offsets: its Mahalanobis distance below the chi-square's {NOISE_QUANTILE:.0%} "
+              f"quantile)."]
     if t["library_met"] is not None:
         L.append(f"- Library attribution at least {ATTRIBUTION_SHARE:.0%} (19/20) per effect per robot: "
                  f"{met(t['library_met'])}.")
@@ -785,8 +814,8 @@ def done_when_markdown(dw: dict) -> list[str]:
             L += ["", f"Recommended offsets beyond {FLOOR_FACTOR:g}x the clean floor, and what the diagnosis said:", ""]
             L += [f"- {robot}, {b['edit']} seed {b['seed']} ({b['side']} leg): {b['offsets_rms_deg']:.4f} deg, "
                   f"{b['over_floor']:.2f}x the floor (its seed's clean case: {_cell(b['clean_same_seed_deg'], 4)} "
-                  f"deg; the noise it states: {_cell(b['stated_noise_deg'], 4)} deg RMS, the error "
-                  f"{'within' if b['within_stated_noise'] else 'beyond'} it); says why: "
+                  f"deg; the noise it states: {_cell(b['stated_noise_deg'], 4)} deg RMS{_distance_text(b)}, the "
+                  f"error {'within' if b['within_stated_noise'] else 'beyond'} it); says why: "
                   f"{'yes' if b['says_why'] else 'no'}; recommended {b['recommended'] or '–'}; {b['verdict']}: "
                   f"{b['summary']}" for robot, b in beyond]
     return L

@@ -57,7 +57,7 @@ from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expecte
 from legcal_bench.data.recording import training
 from legcal_bench.errors import NestedFitError
 from legcal_bench.evaluation.metrics import rms
-from legcal_bench.estimation.problem.fit import (ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
+from legcal_bench.estimation.problem.fit import (NOISE_TILT, ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
                                                  whitened_rows)
 from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
 from legcal_bench.robots.legmap import SIDES
@@ -94,6 +94,9 @@ class Evaluated:
     cov: np.ndarray | None = None
     rank: np.ndarray | None = None  # each frame's (kept frames)
     extra: np.ndarray | None = None  # whitened columns beyond the model's (`generic_fit`)
+    # The whitened columns of a fixed error of the IMU's vertical (roll, pitch; segment
+    # means eliminated): the nuisance the offsets' stated noise carries (`offsets_cov`).
+    tilt: np.ndarray | None = None
 
     @property
     def k(self) -> int:
@@ -129,12 +132,14 @@ def evaluate(ctx: Context, fit, segments, extra=(), keep_frames: bool = False, a
     cov = frame_covariances(fr.G, fr.H, ctx.sigma_q, ctx.sigma_t)
     W, rank = whitening(cov)
     free = _free_columns(fit)
-    z, Jw = whitened_system(fr.r, fr.J[:, :, free], W)
+    tilt = fr.J[:, :, fr.model.slices[NOISE_TILT]][:, :, :2]
+    z, J = whitened_system(fr.r, np.concatenate([fr.J[:, :, free], tilt], axis=2), W)
+    Jw = np.ascontiguousarray(J[:, :len(free)])
     step = np.linalg.lstsq(Jw, z, rcond=None)[0]
     n_seg = len(np.unique(fr.segment))
     return Evaluated(fit, z, Jw, chi2_after(z, Jw) if at_step else float(z @ z),
                      int(rank.sum() - 6 * n_seg - len(free)), int(rank.sum()), step,
-                     *((fr, W, cov, rank) if keep_frames else ()))
+                     *((fr, W, cov, rank) if keep_frames else ()), tilt=J[:, len(free):])
 
 
 POLISH_MAX_STEPS = 12
@@ -225,6 +230,30 @@ def nested(ctx: Context, parent: Evaluated, name: str, held: dict) -> Evaluated:
         raise NestedFitError(f"the fit with {' + '.join(names)} ended at chi2 {ev.chi2:.6g}, above "
                              f"{parent.chi2:.6g} of the model it extends ({' + '.join(pf.effects) or 'offsets only'})")
     return ev
+
+
+def offsets_cov(ctx: Context, ev: Evaluated) -> np.ndarray:
+    """(n, n) covariance (rad^2) of the offsets of the model at `ev`, the noise their
+    estimate carries: the frames' noise (the whitened problem's posterior, as `_std`)
+    and a fixed error of the IMU's vertical within the recordings' declared bound
+    (`SensorModel.tilt_bound`, as the standard deviation of a nuisance the fit does not
+    estimate). The frames' noise averages down over a recording; that error does not,
+    and no static data separate it from equal pitch offsets on a pitch-first hip (the
+    suite's clean A3-like sets: their errors' Mahalanobis distance under the frames'
+    noise alone averaged about twice its degrees of freedom)."""
+    free = _free_columns(ev.fit)
+    k, bound = len(free), ctx.noise.get("tilt_bound_rad", 0.0)
+    if bound > 0 and ev.tilt is not None:
+        J = np.hstack([ev.Jw, ev.tilt])
+        info = J.T @ J
+        info[k:, k:] += np.eye(ev.tilt.shape[1]) / bound**2
+    else:
+        info = ev.Jw.T @ ev.Jw
+    full = np.linalg.pinv(info, hermitian=True)[:k, :k]
+    cov = np.full((ev.fit.model.n, ev.fit.model.n), np.nan)
+    cov[np.ix_(free, free)] = full
+    n = ev.fit.model.n_offsets
+    return cov[:n, :n]
 
 
 def _std(ev: Evaluated) -> np.ndarray:
@@ -410,7 +439,7 @@ def context(robot, recordings, prep: Prepared | None = None) -> Context:
     measured = measured_tilt_noise(prep.kin, prep.stances)
     sigma_t = sig["tilt"] if measured is None else max(sig["tilt"], measured)
     noise = {"encoder_rad": sig["encoder"], "tilt_declared_rad": sig["tilt"], "tilt_measured_rad": measured,
-             "tilt_used_rad": sigma_t}
+             "tilt_used_rad": sigma_t, "tilt_bound_rad": prep.stances[0].sensor_model.tilt_bound}
     return Context(prep, sig["encoder"], sigma_t, {r.name: r for r in recordings},
                    max(sig["feet_rotation"], sig["flat_normal"]), noise)
 
@@ -645,7 +674,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         for i in range(n_q, model.n):
             params[model.names[i]] = {"value": float(final.fit.x[i]), "std": float(std[i]),
                                       "unit": model.units[i], "held": model.names[i] in final.fit.held}
-    cands = _candidates(base, cv_base, fitted, set_aside, selected, names)
+    cands = _candidates(ctx, base, cv_base, fitted, set_aside, selected, names)
     rec = _recommend(cands, verdict, selected)
     report = {
         "verdict": verdict,
@@ -684,11 +713,12 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     return report
 
 
-def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, names) -> list[dict]:
+def _candidates(ctx: Context, base: Evaluated, cv_base, fitted, set_aside: dict, selected, names) -> list[dict]:
     """The recommendation's candidates: the offsets only, every model fitted (each at its
     optimum; an inadmissible one listed with why, never recommended), the generic
     geometry and its sparse description; each with its leave-one-stance-out chi-square
-    (None with one stance) and whether its effects are claimed."""
+    (None with one stance), the covariance of its offsets (`offsets_cov`) and whether
+    its effects are claimed."""
     out = [{"name": "offsets only", "kind": "offsets", "effects": [], "ev": base, "cv_chi2": cv_base,
             "inadmissible": []}]
     seen = {"offsets only"}
@@ -702,11 +732,12 @@ def _candidates(base: Evaluated, cv_base, fitted, set_aside: dict, selected, nam
                     "cv_chi2": None if cv_base is None or bad else _cv(ev)[0]})
     for c in out:
         ev = c["ev"]
+        cov = offsets_cov(ctx, ev)
         c.update(k=ev.k, chi2=ev.chi2, dof=ev.dof, admissible=not c["inadmissible"],
                  claimed=(c["kind"] == "offsets" or c["effects"] == list(selected)),
                  set_aside=set_aside.get(c["name"]),
                  offsets_rad=dict(zip(names, map(float, ev.fit.x[:ev.fit.model.n_offsets]))),
-                 offsets_std_rms_rad=rms(_std(ev)[:ev.fit.model.n_offsets]))
+                 offsets_std_rms_rad=rms(np.sqrt(np.diag(cov))), offsets_cov_rad2=cov.tolist())
     return out
 
 
@@ -794,6 +825,9 @@ def _recommended_text(rep: dict) -> str:
     base = next((c for c in rep["candidates"] if c.get("kind") == "offsets"), None)
     if rec.get("offsets_std_rms_rad"):
         text += f", their noise {np.rad2deg(rec['offsets_std_rms_rad']):.4f} deg RMS"
+        bound = (rep.get("noise") or {}).get("tilt_bound_rad")
+        if bound:
+            text += f" (the frames' noise and the IMU's vertical, declared within {1e3 * bound:.2f} mrad)"
         if rec.get("kind") != "offsets" and base and base.get("offsets_std_rms_rad"):
             ratio = rec["offsets_std_rms_rad"] / base["offsets_std_rms_rad"]
             if ratio > NOISIER:

@@ -194,15 +194,17 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
     assert "of the 3 beyond, 1 say why" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     rows[8]["summary"] = "unexplained; the sparse description is not unique: a instead of b"
     assert done_when(rows)["totals"]["beyond_say_why"] == 2
-    # ... and one whose error is within the noise it states for its recommended offsets:
-    # 12 joints, the RMS of 12 errors at the stated std below sqrt(chi2_0.99(12) / 12) =
-    # 1.477 times it.
+    # ... and one whose error is within the covariance it states for its recommended
+    # offsets: the squared Mahalanobis distance below chi2_0.99(dof) = 26.217 on 12 dof.
     rows[5]["summary"] = "unexplained"
-    for sd, says in ((0.031 / 1.47, True), (0.031 / 1.49, False)):
-        rows[5].update(joints=12, candidates=[{"name": "offsets", "recommended": False, "offsets_std_rms_deg": 1.0},
-                                               {"name": "g", "recommended": True, "offsets_std_rms_deg": sd}])
+    for d2, says in ((26.2, True), (26.3, False)):
+        rows[5].update(joints=12, candidates=[
+            {"name": "offsets", "recommended": False, "offsets_std_rms_deg": 1.0},
+            {"name": "g", "recommended": True, "offsets_std_rms_deg": 0.01, "offsets_distance": {"d2": d2, "dof": 12}}])
         b = done_when(rows)["robots"]["r"]["beyond"][0]
-        assert (b["stated_noise_deg"], b["within_stated_noise"], b["says_why"]) == (sd, says, says)
+        assert (b["stated_noise_deg"], b["within_stated_noise"], b["says_why"]) == (0.01, says, says)
+        assert f"squared Mahalanobis distance under its covariance {d2:.1f} on 12 dof (99%: 26.2), the error " \
+               f"{'within' if says else 'beyond'} it" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
     rows[-3]["selected"] = ["leg_length"]
     for r_ in rows:
@@ -236,7 +238,8 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
            "candidates": [{"name": "offsets", "kind": "offsets", "effects": [], "offsets_rad": {"a": d, "b": d},
                            "cv_chi2": 12.0, "admissible": True, "set_aside": None, "recommended": False},
                           {"name": "generic", "kind": "generic", "effects": [], "offsets_rad": {"a": 0.0, "b": d},
-                           "cv_chi2": 10.0, "admissible": True, "set_aside": None, "recommended": True}],
+                           "cv_chi2": 10.0, "admissible": True, "set_aside": None, "recommended": True,
+                           "offsets_cov_rad2": [[d**2, 0.0], [0.0, (d / 2) ** 2]]}],
            "recommended": "generic", "generic": {"explains": True, "consistent": ["f"], "inconsistent": []}}
     monkeypatch.setattr(ev, "diagnose", lambda *a, **k: rep)
     row = mg.run_case("a3", "outside", "shank_bent", 0)
@@ -247,6 +250,9 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
     assert [c["offsets_rms_deg"] for c in row["candidates"]] == pytest.approx([1.0, np.sqrt(0.5)])
     assert row["offsets_rms_deg"]["recommended"] == pytest.approx(np.sqrt(0.5))
     assert row["offsets_rms_deg"]["before"] == pytest.approx(1.0)
+    # The error (0, 1 deg) under the stated covariance (stds 1 and 0.5 deg): squared distance 4 on 2 dof.
+    assert row["candidates"][0]["offsets_distance"] is None
+    assert row["candidates"][1]["offsets_distance"] == {"d2": pytest.approx(4.0), "dof": 2}
     for k in ("candidates", "recommended", "generic"):
         rep.pop(k)
     row = mg.run_case("a3", "outside", "shank_bent", 0)

@@ -3,6 +3,7 @@ by the offsets, a library effect is found and named, an edit outside the library
 "unexplained" and located on the edited leg, never confidently misnamed."""
 
 import numpy as np
+import pytest
 
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.evaluation.modelgap import diagnose
@@ -31,6 +32,17 @@ def test_clean_data_are_explained_by_the_offsets(tmp_path):
     nz = rep["noise"]
     assert abs(nz["tilt_measured_rad"] / nz["tilt_declared_rad"] - 1) < 0.03, nz
     assert nz["tilt_used_rad"] == max(nz["tilt_measured_rad"], nz["tilt_declared_rad"])
+    # The noise stated for the offsets carries the IMU's declared vertical error, which
+    # the frames' noise does not: the noise-only posterior plus that error's effect on
+    # the offsets (their response to it, -A^-1 B, times the bound), and no less.
+    rec = next(c for c in rep["candidates"] if c["recommended"])
+    cov = np.asarray(rec["offsets_cov_rad2"])
+    assert rec["name"] == "offsets only" and nz["tilt_bound_rad"] == pytest.approx(1e-4 + 1e-3 / 9.81, rel=1e-3)
+    assert rec["offsets_std_rms_rad"] == pytest.approx(np.sqrt(np.mean(np.diag(cov))))
+    frames_only = np.array([rep["offsets_noise_std_rad"][n] for n in rep["offsets_rad"]])
+    assert np.all(np.diag(cov) >= frames_only**2 * (1 - 1e-9))
+    pitch = [i for i, n in enumerate(rep["offsets_rad"]) if "hip_pitch" in n]  # a pitch-first hip: the IMU's pitch
+    assert np.all(np.sqrt(np.diag(cov))[pitch] > 1.5 * frames_only[pitch])
     # IMU pitch on a pitch-first hip: reported as confounded, computed.
     assert any("hip_pitch" in c["offsets"] and c["effect"] == "imu_tilt" for c in rep["confounded"])
     # The report: no localization claimed on explained data, the rules in words (issue #41).
@@ -319,3 +331,28 @@ def test_a_sparse_description_another_explains_as_well_is_said_not_unique(tmp_pa
     truth = load_truth(list_segments(tmp_path / "set")[0]).offsets
     err = np.rad2deg(np.sqrt(np.mean((np.array(list(rep["offsets_rad"].values())) - truth) ** 2)))
     assert err < 0.01, err
+
+
+def test_the_offsets_covariance_carries_the_imu_vertical_within_its_declared_bound():
+    # offsets_cov on a linear system: with the bound b, the offsets' block of the
+    # posterior of [offsets, effect, IMU vertical] under a prior of std b on the vertical
+    # (the closed form by the Schur complement); with no bound, the frames' noise alone.
+    import types
+
+    from legcal_bench.evaluation.modelgap import Evaluated, offsets_cov
+
+    rng = np.random.default_rng(0)
+    Jw, tilt = rng.standard_normal((200, 4)), rng.standard_normal((200, 2)) + 0.5
+    model = types.SimpleNamespace(n=4, n_offsets=3, names=["a", "b", "c", "e"])
+    ev = Evaluated(types.SimpleNamespace(model=model, held=[]), np.zeros(200), Jw, 0.0, 0, 200, np.zeros(4), tilt=tilt)
+    A, B, D = Jw.T @ Jw, Jw.T @ tilt, tilt.T @ tilt
+    Ai = np.linalg.inv(A)
+    for b in (0.05, 0.5):
+        ctx = types.SimpleNamespace(noise={"tilt_bound_rad": b})
+        schur = np.linalg.inv(D + np.eye(2) / b**2 - B.T @ Ai @ B)
+        assert offsets_cov(ctx, ev) == pytest.approx((Ai + Ai @ B @ schur @ B.T @ Ai)[:3, :3], rel=1e-9)
+    assert offsets_cov(types.SimpleNamespace(noise={"tilt_bound_rad": 0.0}), ev) == pytest.approx(Ai[:3, :3])
+    # A held column (the effect's) drops out of the fit: its row and column are not the offsets'.
+    held = Evaluated(types.SimpleNamespace(model=model, held=["e"]), np.zeros(200), Jw[:, :3], 0.0, 0, 200,
+                     np.zeros(3), tilt=tilt)
+    assert offsets_cov(types.SimpleNamespace(noise={}), held) == pytest.approx(np.linalg.inv(Jw[:, :3].T @ Jw[:, :3]))
