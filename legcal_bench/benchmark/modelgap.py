@@ -611,7 +611,9 @@ def done_when(rows: list[dict]) -> dict:
         n_within = sum(e["within"] for e in edits) if bound is not None else None
         out[robot] = {"clean_cases": len(clean), "floor_offsets_rms_deg": floor, "edits": edits, "outside": n_out,
                       "within": n_within, "within_share": n_within / n_out if n_out and n_within is not None else None,
-                      "beyond": beyond, "library": library}
+                      "beyond": beyond, "library": library,
+                      "stated_noise": {"clean": _calibration([r for r in rr if r["kind"] == "clean"]),
+                                       "outside": _calibration(outside)}}
         tot["outside"] += n_out
         for v in ("selected", "ambiguous", "unexplained", "explained"):
             tot[v] += sum(e[v] for e in edits)
@@ -629,6 +631,19 @@ def done_when(rows: list[dict]) -> dict:
                beyond_say_why=sum(b["says_why"] for v in out.values() for b in v["beyond"]),
                library_met=all(x["met"] for x in lib) if lib else None)
     return {"robots": out, "totals": tot}
+
+
+def _calibration(rows: list[dict]) -> dict | None:
+    """How well the covariance the diagnosis states for its recommended offsets matches
+    their errors over `rows`: the mean squared Mahalanobis distance per degree of freedom
+    (1 when it is right, below when it overstates the noise, above when it understates
+    it) and how many are within its NOISE_QUANTILE (`_within_noise`). None without rows
+    that record it."""
+    dist = [(r, d) for r in rows if (d := _stated_distance(r))]
+    if not dist:
+        return None
+    return {"cases": len(dist), "d2_per_dof": float(np.mean([d["d2"] / d["dof"] for _, d in dist])),
+            "within": sum(_within_noise(r) for r, _ in dist)}
 
 
 def _clean_summary(robot: str, case: str, clean: list[dict]) -> dict:
@@ -780,6 +795,14 @@ def done_when_markdown(dw: dict) -> list[str]:
               f"offsets, or that the sparse description is not unique, or the error is within the covariance it "
               f"states for the offsets: its Mahalanobis distance below the chi-square's {NOISE_QUANTILE:.0%} "
               f"quantile)."]
+    cal = [(robot, k, v["stated_noise"][k]) for robot, v in robots.items() for k in ("clean", "outside")
+           if v["stated_noise"][k]]
+    if cal:
+        L.append(f"- The noise the verdicts state for their recommended offsets, against their errors (squared "
+                 f"Mahalanobis distance per degree of freedom, 1 when the stated covariance is right; cases within "
+                 f"its {NOISE_QUANTILE:.0%} quantile): "
+                 + "; ".join(f"{robot} {k} {c['d2_per_dof']:.2f}, {c['within']}/{c['cases']}" for robot, k, c in cal)
+                 + ".")
     if t["library_met"] is not None:
         L.append(f"- Library attribution at least {ATTRIBUTION_SHARE:.0%} (19/20) per effect per robot: "
                  f"{met(t['library_met'])}.")

@@ -201,8 +201,14 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
         rows[5].update(joints=12, candidates=[
             {"name": "offsets", "recommended": False, "offsets_std_rms_deg": 1.0},
             {"name": "g", "recommended": True, "offsets_std_rms_deg": 0.01, "offsets_distance": {"d2": d2, "dof": 12}}])
-        b = done_when(rows)["robots"]["r"]["beyond"][0]
+        r_ = done_when(rows)["robots"]["r"]
+        b = r_["beyond"][0]
         assert (b["stated_noise_deg"], b["within_stated_noise"], b["says_why"]) == (0.01, says, says)
+        # The stated noise's calibration over the cases that record it (one outside, no clean).
+        assert r_["stated_noise"] == {"clean": None, "outside": {"cases": 1, "d2_per_dof": pytest.approx(d2 / 12),
+                                                                 "within": int(says)}}
+        assert f"quantile): r outside {d2 / 12:.2f}, {int(says)}/1." in markdown(
+            {"summary": summarize(rows), "rows": rows}, "m", "c")
         assert f"squared Mahalanobis distance under its covariance {d2:.1f} on 12 dof (99%: 26.2), the error " \
                f"{'within' if says else 'beyond'} it" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
