@@ -482,16 +482,36 @@ class ModelEdit:
     def export(self, workdir: Path, springs=()) -> LegMap:
         """Write the copy (with its assets) into `workdir`, add the series `springs` ((leg
         index, k) of `compliance`), and return the simulated robot's leg map on it."""
-        from dm_control import mjcf
-
         self._live = None
         model = self._zero()[0]  # the current copy (a joint_axis edit changes no body pose, yet counts here)
         workdir.mkdir(parents=True, exist_ok=True)
         name = f"{Path(self.legmap.mjcf).stem}_reality.xml"
-        mjcf.export_with_assets(self.mjcf, str(workdir), out_file_name=name)
+        (workdir / name).write_text(self.mjcf.to_xml_string())  # as `mjcf.export_with_assets`, its assets ...
+        _place_assets(self.mjcf, Path(self.legmap.mjcf).parent, workdir)  # ... linked where unchanged
         _add_series_springs(workdir / name, self.legmap, list(springs), model)
         # The edited MJCF is the model for Pinocchio too (a URDF robot's URDF is not edited).
         return replace(self.legmap, mjcf=(workdir / name).resolve(), urdf=None)
+
+
+def _place_assets(model, source: Path, workdir: Path) -> None:
+    """The assets of the MJCF `model` (meshes, textures), under the names its XML gives
+    them (`name-sha1.ext`, dm_control's), in `workdir`: a link to the source model's own
+    file where it is unchanged, else the contents written. (Copies of the G1's meshes
+    were 19.5 MB a session set, written and deleted again.) The files looked for: those
+    in the model's folder and its compiler's mesh, texture and asset folders."""
+    from dm_control.mujoco.wrapper import util
+
+    folders = {source} | {source / d for d in (model.compiler.meshdir, model.compiler.texturedir,
+                                                model.compiler.assetdir) if d}
+    originals = {p.name: p.resolve() for d in folders if d.is_dir() for p in d.iterdir() if p.is_file()}
+    for vfs, contents in model.get_assets().items():
+        data = util.to_binary_string(contents)
+        stem, _, rest = vfs.rpartition("-")
+        original = originals.get(stem + Path(rest).suffix)
+        if original is not None and original.stat().st_size == len(data) and original.read_bytes() == data:
+            (workdir / vfs).symlink_to(original)
+        else:
+            (workdir / vfs).write_bytes(data)
 
 
 @dataclass

@@ -190,3 +190,20 @@ def test_an_installed_plugin_with_physics_is_an_effect_of_the_simulation(tmp_pat
         parse_effect("nudge:side=left")
     with pytest.raises(ConfigError, match="side 'middle' is not one of"):
         build_reality(lm, lm, ["nudge:mm=1,side=middle"], sim_sensors("zero"), tmp_path / "x")
+
+
+@pytest.mark.skipif(available(G1) is not None, reason=str(available(G1)))
+def test_an_edited_model_links_its_unchanged_meshes_to_the_source_models(tmp_path):
+    # The edited G1 (the meshes of its whole body) links the source model's mesh files
+    # instead of copying them (19.5 MB a session set), and MuJoCo reads the same meshes.
+    import mujoco
+
+    lm = load_robot(G1)
+    r = build_reality(lm, lm, ["mount_offset:side=left,axis=y,mm=4"], sim_sensors("zero"), tmp_path / "model")
+    folder = Path(r.sim_legmap.mjcf).parent
+    meshes = [p for p in folder.iterdir() if p.suffix.lower() == ".stl"]
+    assert len(meshes) > 20 and all(p.is_symlink() and p.resolve().parent != folder for p in meshes)
+    edited, source = (mujoco.MjModel.from_xml_path(str(p)) for p in (r.sim_legmap.mjcf, lm.mjcf))
+    for field in ("mesh_vert", "mesh_face", "mesh_normal"):
+        assert np.array_equal(getattr(edited, field), getattr(source, field)), field
+    assert not np.array_equal(edited.body_pos, source.body_pos)  # the edit itself is in the copy
