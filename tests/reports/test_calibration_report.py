@@ -28,6 +28,8 @@ from tests.logs.test_import import as_log  # the session written back to back as
 
 PNG = b"\x89PNG\r\n\x1a\n"
 HELDOUT_SEGMENT = "stance_S5"  # the collect session's held-out recording, found as the fifth stance of the log
+# The tests share the reports `reports` makes: one process runs them all (built once).
+pytestmark = pytest.mark.xdist_group("calibration_report")
 
 
 @pytest.fixture(scope="module")
