@@ -29,8 +29,10 @@ def robots(tmp_path_factory):
 
 
 # The mirrored pitch servos bear on a reversed knee and on exchanged legs, not on the IMU's
-# axes: the IMU's x and z exchanged is `slow` here.
-@pytest.mark.parametrize("defect, edit, expected", defects_on_another_robot(("IMU x<->z",)))
+# axes (mounted unrotated on the pelvis, as the A3-like robot's): its three axis defects
+# are `slow` here.
+@pytest.mark.parametrize("defect, edit, expected", defects_on_another_robot(("IMU x<->z", "IMU x<->y",
+                                                                             "IMU x reversed")))
 def test_each_defect_is_named_on_the_mirrored_robot(robots, sessions, defect, edit, expected):
     check_defect(sessions, robots["a3_mirrored_pitch"], "interfoot", edit, expected)
 

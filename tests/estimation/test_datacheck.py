@@ -129,10 +129,10 @@ DEFECTS = [
 
 def defects_on_another_robot(slow: tuple[str, ...]):
     """DEFECTS as test parameters, the named ones `slow`: on a robot other than the
-    A3-like one, the defects whose wrong model makes the solve long (10-20 s each: a
-    knee read reversed, the IMU's x and z exchanged) run in `make test-slow` when that
-    robot's kinematics do not bear on them; the test command runs them on the A3-like
-    robot with both calibrators."""
+    A3-like one, the defects that robot's kinematics do not bear on (a knee read
+    reversed where the knee is as the A3-like robot's; the IMU's axes where it is
+    mounted unrotated, as the A3-like robot's) run in `make test-slow`; the test command
+    runs them on the A3-like robot with both calibrators."""
     return [pytest.param(*d, id=d[0], marks=[pytest.mark.slow] if d[0] in slow else []) for d in DEFECTS]
 
 
