@@ -590,6 +590,7 @@ def done_when(rows: list[dict]) -> dict:
                           "generic_explains": sum(bool(g.get("explains")) for g in gen) if gen else None,
                           "consistent": _count(f for g in gen for f in g.get("consistent") or ()),
                           "within": None if within is None else sum(within),
+                          "stated_noise": _calibration(rs),
                           "offsets_rms_deg": _mean_max([_recommended(r) for r in rs])})
             for r, ok in zip(rs, within or ()):
                 if not ok:
@@ -819,7 +820,8 @@ def done_when_markdown(dw: dict) -> list[str]:
               "chosen by cross-validation over the training stances):", "",
               f"| robot | edit | family | seeds | selected (wrong) | ambiguous | unexplained | explained | recommended "
               f"| generic explains; consistent families | offsets error, mean / max (deg) | within {FLOOR_FACTOR:g}x "
-              "floor |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+              f"floor | within the stated covariance ({NOISE_QUANTILE:.0%}); squared distance per dof |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for robot, v in robots.items():
             for e in v["edits"]:
                 sel = str(e["selected"]) + (f" ({', '.join(f'{k} {n}' for k, n in e['selected_effects'].items())})"
@@ -829,9 +831,11 @@ def done_when_markdown(dw: dict) -> list[str]:
                     + (f"; {', '.join(f'{k} {n}' for k, n in e['consistent'].items())}" if e["consistent"] else ""))
                 rec = ", ".join(f"{k} {n}" for k, n in e["recommended"].items()) or "–"
                 within = "–" if e["within"] is None else f"{e['within']}/{e['seeds']}"
+                sn = e.get("stated_noise")
+                stated = "–" if not sn else f"{sn['within']}/{sn['cases']}; {sn['d2_per_dof']:.2f}"
                 L.append(f"| {robot} | {e['edit']} (`{'`, `'.join(e['specs'])}`) | {e['family'] or '–'} | {e['seeds']} "
                          f"| {sel} | {e['ambiguous']} | {e['unexplained']} | {e['explained']} | {rec} | {gen} | "
-                         f"{e['offsets_rms_deg']['mean']:.4f} / {e['offsets_rms_deg']['max']:.4f} | {within} |")
+                         f"{e['offsets_rms_deg']['mean']:.4f} / {e['offsets_rms_deg']['max']:.4f} | {within} | {stated} |")
         beyond = [(robot, b) for robot, v in robots.items() for b in v["beyond"]]
         if beyond:
             L += ["", f"Recommended offsets beyond {FLOOR_FACTOR:g}x the clean floor, and what the diagnosis said:", ""]

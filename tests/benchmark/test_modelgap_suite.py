@@ -207,8 +207,9 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
         # The stated noise's calibration over the cases that record it (one outside, no clean).
         assert r_["stated_noise"] == {"clean": None, "outside": {"cases": 1, "d2_per_dof": pytest.approx(d2 / 12),
                                                                  "within": int(says)}}
-        assert f"quantile): r outside {d2 / 12:.2f}, {int(says)}/1." in markdown(
-            {"summary": summarize(rows), "rows": rows}, "m", "c")
+        md = markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
+        assert f"quantile): r outside {d2 / 12:.2f}, {int(says)}/1." in md
+        assert f"| 2/3 | {int(says)}/1; {d2 / 12:.2f} |" in md  # the edit's row: within the floor; stated noise
         assert f"squared Mahalanobis distance under its covariance {d2:.1f} on 12 dof (99%: 26.2), the error " \
                f"{'within' if says else 'beyond'} it" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     # A wrong library attribution (18 of 20) fails its line; rows without the #41 keys still score.
