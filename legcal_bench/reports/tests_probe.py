@@ -27,17 +27,24 @@ _DURATION = re.compile(r"^\s*([0-9.]+)s\s+(call|setup|teardown)\s+(\S+)")
 _COUNT = re.compile(r"(\d+) (passed|failed|errors?|skipped|deselected|xfailed|xpassed)")
 
 
+def _makefile(src: str) -> str:
+    makefile = os.path.join(src, "Makefile")
+    return open(makefile).read() if os.path.exists(makefile) else ""
+
+
 def workers(src: str) -> list[str]:
     """The test command's own process count: `make test` runs `pytest -n $(TEST_WORKERS)`
     (default 2) in a tree whose Makefile says so (since issue #36); before, one process."""
-    makefile = os.path.join(src, "Makefile")
-    text = open(makefile).read() if os.path.exists(makefile) else ""
-    return ["-n", os.environ.get("TEST_WORKERS", "2")] if "pytest -n $(TEST_WORKERS)" in text else []
+    return ["-n", os.environ.get("TEST_WORKERS", "2")] if "pytest -n $(TEST_WORKERS)" in _makefile(src) else []
 
 
 def run_suite(src: str) -> dict:
-    """One run of the suite in `src`: wall seconds, counts by outcome, the slowest tests."""
+    """One run of the suite in `src`: wall seconds, counts by outcome, the slowest tests.
+    As that tree's `make test` runs it: without PYTHONDONTWRITEBYTECODE where its Makefile
+    unexports it (Python then caches bytecode)."""
     env = dict(os.environ)
+    if "unexport PYTHONDONTWRITEBYTECODE" in _makefile(src):
+        env.pop("PYTHONDONTWRITEBYTECODE", None)
     if env.get("PYTHONPATH"):
         env["PYTHONPATH"] = os.pathsep.join(os.path.abspath(p) if p else p
                                             for p in env["PYTHONPATH"].split(os.pathsep))

@@ -138,3 +138,23 @@ def test_the_probes_use_only_what_the_oldest_baseline_has():
                 missing.append(f"{probe}:{line}: {module}.{name}")
     assert not missing, f"not in {BASELINE}: {missing}"
     assert len(probes) == 5
+
+
+def test_the_tests_probe_runs_the_suite_as_its_trees_make_test_does(tmp_path, monkeypatch):
+    # Its process count, and bytecode caching where that tree's Makefile lets Python cache.
+    import subprocess
+
+    from legcal_bench.reports import tests_probe
+
+    seen = []
+    monkeypatch.setattr(subprocess, "run", lambda argv, cwd, env, **kw: seen.append((argv, env)) or
+                        subprocess.CompletedProcess(argv, 0, "1 passed in 1.0s\n", ""))
+    monkeypatch.setenv("PYTHONDONTWRITEBYTECODE", "1")
+    monkeypatch.delenv("TEST_WORKERS", raising=False)
+    (tmp_path / "Makefile").write_text("test:\n\tpython -m pytest -n $(TEST_WORKERS)\n")
+    assert tests_probe.run_suite(str(tmp_path))["counts"] == {"passed": 1}
+    (tmp_path / "Makefile").write_text("unexport PYTHONDONTWRITEBYTECODE\ntest:\n\tpython -m pytest -n $(TEST_WORKERS)\n")
+    tests_probe.run_suite(str(tmp_path))
+    (old_argv, old_env), (new_argv, new_env) = seen
+    assert old_argv[3:5] == new_argv[3:5] == ["-n", "2"]
+    assert old_env["PYTHONDONTWRITEBYTECODE"] == "1" and "PYTHONDONTWRITEBYTECODE" not in new_env
