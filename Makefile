@@ -11,8 +11,8 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 # Python caches each module's bytecode on its first import, unless PYTHONDONTWRITEBYTECODE
 # is set (these machines set it): then every process compiles every module it imports
-# again, about 1 s of a command's start-up with scipy, MuJoCo and dm_control, and the test
-# suite starts hundreds of processes. The targets here let Python cache it.
+# again (scipy's, MuJoCo's, dm_control's, ours), and the test suite starts many
+# processes. The targets here let Python cache it.
 unexport PYTHONDONTWRITEBYTECODE
 
 .PHONY: demo test test-slow docs install bench-env bench-standard clean
