@@ -19,9 +19,8 @@ from tests.docs import snippets as sn
 
 RUN = [d for d in sn.DOCUMENTS if any(not s.not_run for s in sn.snippets(d))]
 # The guides whose commands repeat the README's paths at more length (a suite, two
-# closed-loop evaluations, the envs' smoke test and examples): `make test-slow` runs
-# them, keeping `make test` in its budget.
-SLOW = ("docs/guides/benchmark.md", "docs/guides/closed-loop.md", "docs/guides/envs.md")
+# closed-loop evaluations): `make test-slow` runs them, keeping `make test` in its budget.
+SLOW = ("docs/guides/benchmark.md", "docs/guides/closed-loop.md")
 
 
 @pytest.fixture(scope="module")
