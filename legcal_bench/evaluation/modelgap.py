@@ -238,9 +238,9 @@ def offsets_cov(ctx: Context, ev: Evaluated) -> np.ndarray:
     and a fixed error of the IMU's vertical within the recordings' declared bound
     (`SensorModel.tilt_bound`, as the standard deviation of a nuisance the fit does not
     estimate). The frames' noise averages down over a recording; that error does not,
-    and no static data separate it from equal pitch offsets on a pitch-first hip (the
-    suite's clean A3-like sets: their errors' Mahalanobis distance under the frames'
-    noise alone averaged about twice its degrees of freedom)."""
+    and no static data separate it from equal pitch offsets on a pitch-first hip. The
+    model-gap suite weighs this covariance against the errors of its recommended
+    offsets (`legcal_bench.benchmark.modelgap._calibration`)."""
     free = _free_columns(ev.fit)
     k, bound = len(free), ctx.noise.get("tilt_bound_rad", 0.0)
     if bound > 0 and ev.tilt is not None:
