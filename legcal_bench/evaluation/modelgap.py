@@ -57,8 +57,8 @@ from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expecte
 from legcal_bench.data.recording import training
 from legcal_bench.errors import NestedFitError
 from legcal_bench.evaluation.metrics import rms
-from legcal_bench.estimation.problem.fit import (NOISE_TILT, ModelFit, declared_noise, effect_model, fit_model, frame_residuals,
-                                                 whitened_rows)
+from legcal_bench.estimation.problem.fit import (NOISE_TILT, ModelFit, declared_noise, effect_model, fit_model,
+                                                 frame_residuals, whitened_rows)
 from legcal_bench.estimation.problem.stance import Prepared, prepare_sensor
 from legcal_bench.robots.legmap import SIDES
 
