@@ -83,6 +83,12 @@ def test_a_shank_bent_sideways_is_unexplained_on_the_right_leg(tmp_path):
     assert rec[0]["k"] == min(c["k"] for c in ok if c["cv_chi2"] - low < 10)
     assert rep["offsets_rad"] == rec[0]["offsets_rad"] and rep["recommended"] == rec[0]["name"]
     assert rec[0]["kind"] == "generic", rec[0]["name"]
+    # The sparse description's noise is stated with the generic geometry's beside it, which
+    # does not hold those few columns for the whole change.
+    whole = next(c for c in rep["candidates"] if c["name"] == "generic geometry")
+    assert rec[0]["name"] == "sparse geometry" and whole["offsets_std_rms_rad"] > rec[0]["offsets_std_rms_rad"]
+    assert (f"that noise holds the sparse description for exact: the generic geometry's, which does not, is "
+            f"{np.rad2deg(whole['offsets_std_rms_rad']):.4f} deg RMS") in rep["summary"]
     truth = load_truth(list_segments(tmp_path / "set")[0]).offsets
     err = {k: np.sqrt(np.mean((np.array(list(rep[k].values())) - truth) ** 2)) for k in ("offsets_rad", "offsets_only_rad")}
     assert err["offsets_rad"] < 0.5 * err["offsets_only_rad"], err
