@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from legcal_bench import inputs
+from legcal_bench.cli.parsing import pool_options
 from legcal_bench.cli.robots import door
 
 
@@ -303,10 +304,7 @@ def add_commands(sub) -> None:
     bn.add_argument("--calibrators", nargs="+", default=None,
                     help="only these registered calibrators (modelgap suite: the one whose offsets every diagnosis "
                          "starts from, default interfoot)")
-    bn.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
-    bn.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786): run there instead; "
-                                                      "refused at once if nothing answers there (default: none, "
-                                                      "local worker processes)")
+    pool_options(bn)
     bn.add_argument("--data", default="runs/bench/data", help="where session sets are cached (a writable folder; "
                                                               "default runs/bench/data)")
     bn.add_argument("--out", default=BENCH_OUT,
@@ -345,9 +343,7 @@ def add_commands(sub) -> None:
     sw.add_argument("--stance-seconds", type=float, default=12.0, help="seconds of each stance, as in collect "
                                                                        "(default 12)")
     sw.add_argument("--heldout", type=int, default=3, help="held-out sessions, as in collect (default 3)")
-    sw.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2)")
-    sw.add_argument("--scheduler", default=None, help="Dask scheduler address (tcp://host:8786); refused at once if "
-                                                      "nothing answers there (default: none, local worker processes)")
+    pool_options(sw)
     sw.add_argument("--out", default="runs/sweep", help="a writable folder for data/ and results/ (default "
                                                         "runs/sweep). Exit code 1 if a cell failed, 2 for a refused "
                                                         "option")

@@ -106,3 +106,13 @@ class TopParser(LegcalParser):
                 formatter.end_section()
         formatter.add_text(self.epilog)
         return formatter.format_help()
+
+
+def pool_options(p: argparse.ArgumentParser, scheduler: bool = True, note: str = "") -> None:
+    """`--workers` and (with `scheduler`) `--scheduler`, in one wording for every command
+    that runs its work in a pool; `note` adds to the workers' help."""
+    p.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1" + note)
+    if scheduler:
+        p.add_argument("--scheduler", default=None,
+                       help="a Dask scheduler address (tcp://host:8786): the work runs there instead; refused at "
+                            "once if nothing answers there (default: none, local worker processes)")

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from legcal_bench.cli.parsing import pool_options
+
 DEFAULT_FIXTURE = Path("tests/fixtures/regression.json")
 RUNS = "runs"  # where every report command writes unless --out names a committed report
 
@@ -274,7 +276,7 @@ def add_commands(sub) -> None:
             t.add_argument("--robots", nargs="+", default=robots, help="built-in names or leg-map paths")
         t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")
         t.add_argument("--seeds", type=int, default=seeds, help="seeds 0..N-1 per robot and case, at least 1")
-        t.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1")
+        pool_options(t, scheduler=False)
         _out(t, name, committed, f"{name.replace('-', '_')}.md and .json")
         _quiet(t)
         if name == "effects-table":
@@ -292,7 +294,7 @@ def add_commands(sub) -> None:
     rg.add_argument("--fixture", default=str(DEFAULT_FIXTURE), help="fixture JSON, read (written only with --update)")
     rg.add_argument("--update", action="store_true",
                     help="write the fixture from the code at hand (only when numbers are meant to move)")
-    rg.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1")
+    pool_options(rg, scheduler=False)
     _quiet(rg)
     rg.set_defaults(func=cmd_regression)
 

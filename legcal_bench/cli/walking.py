@@ -9,6 +9,7 @@ import json
 from functools import partial
 
 from legcal_bench import inputs
+from legcal_bench.cli.parsing import pool_options
 from legcal_bench.cli.robots import COUNT0, door, robot_args
 from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
@@ -284,10 +285,7 @@ def add_commands(sub) -> None:
                                                                       "(default calibrated-imu; also realistic)")
     e.add_argument("--sensors", default="realistic", help=f"sensors while walking: {', '.join(SENSOR_PRESET_NAMES)} "
                                                           "(default realistic)")
-    e.add_argument("--workers", type=int, default=2, help="local worker processes, at least 1 (default 2; 1 runs "
-                                                          "here)")
-    e.add_argument("--scheduler", default=None, help="a Dask scheduler address (tcp://host:8786), checked reachable "
-                                                     "before any trial (default: none, local worker processes)")
+    pool_options(e, note=" (1 runs here)")
     e.add_argument("--out", default=WALK_EVAL_OUT,
                    help=f"report folder (report.md, report.json, paths.png, timings.json) with each finished trial in "
                         f"trials/; rerun into it to resume an interrupted run (default {WALK_EVAL_OUT}; the committed "
