@@ -677,18 +677,21 @@ def _recommended(r: dict) -> float:
     return o["after"] if r["selected"] else o["before"]
 
 
-def _stated_distance(r: dict) -> dict | None:
-    """The recommended offsets' error's Mahalanobis distance under their stated covariance
-    (`run_case`'s `offsets_distance`); None on rows made before it was recorded."""
+def _stated(r: dict, key: str):
+    """`key` of the candidate a row's diagnosis recommends: its stated noise
+    (`offsets_std_rms_deg`, deg RMS) or its error's Mahalanobis distance under its stated
+    covariance (`offsets_distance`, `run_case`'s); None on rows made before they were
+    recorded."""
     rec = next((c for c in r.get("candidates") or () if c.get("recommended")), None)
-    return None if rec is None else rec.get("offsets_distance")
+    return None if rec is None else rec.get(key)
+
+
+def _stated_distance(r: dict) -> dict | None:
+    return _stated(r, "offsets_distance")
 
 
 def _stated_noise(r: dict) -> float | None:
-    """The noise (RMS of the offsets' stds, deg) the diagnosis states for the offsets it
-    recommends; None on rows made before it was recorded."""
-    rec = next((c for c in r.get("candidates") or () if c.get("recommended")), None)
-    return None if rec is None else rec.get("offsets_std_rms_deg")
+    return _stated(r, "offsets_std_rms_deg")
 
 
 NOISE_QUANTILE = 0.99  # an error is within its stated noise below this quantile of its distance
