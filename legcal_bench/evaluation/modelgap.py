@@ -50,7 +50,8 @@ from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, l
 from legcal_bench.estimation.modelgap.lineartests import (basis, chi2_after, forward_selection, identifiable, substitutes,
                                                           score_beyond)
 from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMILIES, LegGeometry, generic_effects,
-                                                         is_tilt, joint_columns, project_means, time_columns)
+                                                         is_tilt, joint_columns, project_means, time_columns,
+                                                         twist_place)
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
@@ -324,9 +325,7 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
                                     model.vector({"offsets": bf.x[:n_q]}), bf.q_ref, (), None, bf.segments), box=True)
 
     m = with_selected
-    start = ModelFit(tuple(e.name for e in m.effects), m, m.vector({"offsets": bf.x[:n_q]}), bf.q_ref, (), None,
-                     bf.segments)
-    at0 = evaluate(ctx, start, ctx.prep.segments)
+    at0 = _at_offsets(ctx, bf, m)
     at0 = replace(at0, Jw=at0.Jw[:, :full.n], extra=at0.Jw)
     # The whole and its families over the twists only: the axis tilts add no direction
     # to them, only sparser names for the sparse description (`LegGeometry`).
@@ -383,6 +382,54 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
             inadmissible(ctx, sparse, [e.name for e in sparse.fit.model.effects]),
             "sparse": [full.names[n_q + j] for j in pick], "sparse_ties": ties, "outside_selected": outside,
             "parameters": len(keep), "of": full.n - n_q, "families": None, "_families": families}
+
+
+def _at_offsets(ctx: Context, fit, model: EffectModel) -> Evaluated:
+    """`model` evaluated at the offsets of `fit`, its other parameters zero."""
+    n_q = model.n_offsets
+    start = ModelFit(tuple(e.name for e in model.effects), model, model.vector({"offsets": fit.x[:n_q]}), fit.q_ref,
+                     (), None, fit.segments)
+    return evaluate(ctx, start, ctx.prep.segments)
+
+
+def offset_equivalent(ctx: Context, fit, edited) -> np.ndarray:
+    """(n,) rad: the share of a geometry change that is, in these data, an offset change.
+    The robot `edited` (the model's robot with its geometry changed: a `LegKinematics`,
+    e.g. of a simulator's edited copy) is the generic geometry's parameters
+    (`LegGeometry.values`). At each place, the combinations of its twist that are offsets
+    in these data (a turn about the joint's own axis; a move across the link that a pair
+    of parallel joints makes: the right singular directions of the place's columns,
+    scaled to unit size, beyond the offsets' span with singular values below
+    GEOMETRY_RTOL, at the offsets of `fit`) take their share of the change's twist there
+    (orthogonally, in those scaled units), and the shares are returned as the offsets
+    they are. No data tell them from an encoder's offsets, and every description of the
+    change the generic geometry holds carries them in its offsets: a link twisted about a
+    line not normal to its joints' axes turns a joint's zero with it. Per place: across
+    places, a twist's turn would mix with other places' combinations (on the A3-like, a
+    turn about the shank after the knee and about the hip yaw's axis, which runs through
+    the knee). An axis tilt is its own change, not read into this. The model-gap suite
+    adds this to the injected offsets it scores against (`legcal_bench.benchmark.modelgap`)."""
+    kin = ctx.prep.kin
+    full = EffectModel(kin, generic_effects())
+    n_q = full.n_offsets
+    at0 = _at_offsets(ctx, fit, full)
+    g = full.vector({"offsets": np.zeros(n_q),
+                     **{e.name: e.values(kin, edited) for e in full.effects if isinstance(e, LegGeometry)}})
+    N, Q = at0.Jw[:, :n_q], basis(at0.Jw[:, :n_q])
+    places: dict[str, list[int]] = {}
+    for i in range(n_q, full.n):
+        if twist_place(full.names[i]) is not None and np.linalg.norm(at0.Jw[:, i]) > 0:
+            places.setdefault(twist_place(full.names[i]), []).append(i)
+    share = np.zeros(full.n)
+    for cols in places.values():
+        if not np.any(g[cols]):
+            continue
+        C = at0.Jw[:, cols] / np.linalg.norm(at0.Jw[:, cols], axis=0)
+        _, sv, Vt = np.linalg.svd(C - Q @ (Q.T @ C), full_matrices=False)
+        E = Vt[sv <= GEOMETRY_RTOL]  # orthonormal, in the scaled parameters
+        size = np.linalg.norm(at0.Jw[:, cols], axis=0)
+        share[cols] = E.T @ (E @ (g[cols] * size)) / size
+    return np.linalg.lstsq(N, at0.Jw @ share, rcond=None)[0]
 
 
 def _ties(ctx: Context, N: np.ndarray, C: np.ndarray, z: np.ndarray, pick: list[int], names: list[str]) -> list[dict]:

@@ -249,6 +249,8 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
                            "offsets_cov_rad2": [[d**2, 0.0], [0.0, (d / 2) ** 2]]}],
            "recommended": "generic", "generic": {"explains": True, "consistent": ["f"], "inconsistent": []}}
     monkeypatch.setattr(ev, "diagnose", lambda *a, **k: rep)
+    equivalent = {"outside": np.zeros(2)}
+    monkeypatch.setattr(mg, "_offset_equivalent", lambda *a, **k: equivalent["outside"])
     row = mg.run_case("a3", "outside", "shank_bent", 0)
     assert row["recommended"] == "generic" and row["generic"]["consistent"] == ["f"]
     assert mg._generic({"explains": False, "families": {"a": {"consistent": True}, "b": {"consistent": False}}}) == {
@@ -260,6 +262,21 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
     # The error (0, 1 deg) under the stated covariance (stds 1 and 0.5 deg): squared distance 4 on 2 dof.
     assert row["candidates"][0]["offsets_distance"] is None
     assert row["candidates"][1]["offsets_distance"] == {"d2": pytest.approx(4.0), "dof": 2}
+    # Outside the library the truth is the injected offsets plus the edit's own offset
+    # change (`offset_equivalent`), recorded in the row: here (0, 1 deg), which the
+    # generic candidate's offsets hold exactly.
+    equivalent["outside"] = np.array([0.0, d])
+    row = mg.run_case("a3", "outside", "shank_bent", 0)
+    assert row["offset_equivalent_rad"] == {"a": 0.0, "b": pytest.approx(d)}
+    assert [c["offsets_rms_deg"] for c in row["candidates"]] == pytest.approx([np.sqrt(0.5), 0.0])
+    assert row["offsets_rms_deg"] == {"before": pytest.approx(np.sqrt(0.5)), "after": 0.0, "recommended": 0.0}
+    assert row["candidates"][1]["offsets_distance"]["d2"] == pytest.approx(0.0)
+    # Only outside: a clean case's truth is the injected offsets, and no edit is read.
+    monkeypatch.setattr(mg, "_offset_equivalent", lambda *a, **k: pytest.fail("no edit to read"))
+    monkeypatch.setattr(mg, "_chi2_at_truth", lambda *a, **k: {})
+    row = mg.run_case("a3", "clean", None, 0)
+    assert "offset_equivalent_rad" not in row and row["offsets_rms_deg"]["recommended"] == pytest.approx(np.sqrt(0.5))
+    monkeypatch.setattr(mg, "_offset_equivalent", lambda *a, **k: np.zeros(2))
     for k in ("candidates", "recommended", "generic"):
         rep.pop(k)
     row = mg.run_case("a3", "outside", "shank_bent", 0)

@@ -326,21 +326,31 @@ def test_a_tilted_knee_axis_is_one_tilt_column_and_its_offsets_stay_at_the_floor
     assert err < 0.006, err
 
 
-def test_a_sparse_description_another_explains_as_well_is_said_not_unique(tmp_path):
+@pytest.fixture(scope="module")
+def twisted_shank(tmp_path_factory):
+    """The A3-like's shank twisted 1 deg about its axis (the suite's outside edit, seed
+    3), a short set: (leg map, recordings, folder, spec, side), collected once per process."""
+    from legcal_bench.benchmark.modelgap import outside_spec
+
+    folder = tmp_path_factory.mktemp("twisted_shank")
+    spec, side = outside_spec("shank_twisted", 3, robot="a3")
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=3, heldout=0, effects=(spec,),
+                          stance_s=4.0), folder / "set", progress=False)
+    return lm, load_session(folder / "set", robot=lm), folder, spec, side
+
+
+def test_a_sparse_description_another_explains_as_well_is_said_not_unique(twisted_shank):
     # The A3-like's shank twisted 1 deg about its axis (the suite's outside edit, seed 3):
     # its hip yaw's axis runs through the knee, so the twist after the knee and the knee's
     # axis tilted about z are one change apart from that yaw's offset. Chosen by noise, the
     # tilt put the offsets 0.29 deg off (reports/modelgap/issue41). The twist is the
     # description (the tilts only name sparsely what twists need several columns for),
     # and the verdict says the tie and how far apart the offsets are.
-    from legcal_bench.benchmark.modelgap import outside_spec
     from legcal_bench.evaluation.modelgap import NOT_UNIQUE
 
-    spec, side = outside_spec("shank_twisted", 3, robot="a3")
-    lm = load_robot("a3")
-    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=3, heldout=0, effects=(spec,),
-                          stance_s=4.0), tmp_path / "set", progress=False)
-    rep = diagnose(lm, load_session(tmp_path / "set", robot=lm), effects=())  # the geometry alone: no library fits
+    lm, recs, tmp_path, spec, side = twisted_shank
+    rep = diagnose(lm, recs, effects=())  # the geometry alone: no library fits
     assert rep["recommended"] == "sparse geometry"
     (tie,) = rep["generic"]["sparse_ties"]
     assert rep["generic"]["sparse"] == [tie["instead_of"]] and tie["instead_of"].endswith(".after_knee_rz")
@@ -350,6 +360,62 @@ def test_a_sparse_description_another_explains_as_well_is_said_not_unique(tmp_pa
     truth = load_truth(list_segments(tmp_path / "set")[0]).offsets
     err = np.rad2deg(np.sqrt(np.mean((np.array(list(rep["offsets_rad"].values())) - truth) ** 2)))
     assert err < 0.01, err
+
+
+def test_a_twisted_shank_turns_its_knee_zero_and_only_such_changes_count_as_offsets(twisted_shank, tmp_path):
+    # The twist turns the ankle's body about the line between the knee's and the ankle's
+    # anchors; on the A3-like that line runs 3 mm along the knee's axis over 370 mm, so
+    # the turn has a component about that axis: the knee's zero turns by the angle times
+    # the line's component along the axis (from MuJoCo's anchors here, not from the chain
+    # `offset_equivalent` reads). Changes no offset can stand for count zero; a turn about
+    # the ankle's own axis at the ankle is the ankle's zero, though in the knee's frame it
+    # is a turn and a move (the move is the knee's and the ankle's offsets together).
+    import copy
+    from dataclasses import replace
+
+    import mujoco
+
+    from legcal_bench.estimation.problem.fit import fit_model
+    from legcal_bench.evaluation.modelgap import context, offset_equivalent
+    from legcal_bench.geometry.lie import Exp
+    from legcal_bench.robots.kinematics import LegKinematics
+    from legcal_bench.sim.effects import build_reality
+    from legcal_bench.sim.sensors import sim_sensors
+
+    lm, recs, _, spec, side = twisted_shank
+    ctx = context(lm, recs)
+    fit = fit_model(ctx.prep)
+    kin = ctx.prep.kin
+    names = list(lm.joint_names)
+    knee, ankle = names.index(f"{side}_knee_joint"), names.index(f"{side}_ankle_pitch_joint")
+
+    def equivalent(edit):
+        real = LegKinematics(build_reality(lm, lm, [edit], sim_sensors("zero"), tmp_path / edit).sim_legmap)
+        return offset_equivalent(ctx, fit, real)
+
+    m = mujoco.MjModel.from_xml_path(str(lm.model_file))
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    k, a = m.joint(names[knee]).id, m.joint(names[ankle]).id
+    line = (d.xanchor[a] - d.xanchor[k]) / np.linalg.norm(d.xanchor[a] - d.xanchor[k])
+    turn = np.deg2rad(1.0) * float(line @ d.xaxis[k])
+    assert abs(np.rad2deg(turn)) == pytest.approx(0.0081, abs=1e-4)
+    got = equivalent(spec)
+    assert got[knee] == pytest.approx(turn, rel=1e-6)
+    assert np.abs(np.delete(got, knee)).max() < 1e-6 * abs(turn)
+    for edit in (f"mount_offset:side={side},axis=y,mm=4", f"joint_axis:joint={side}_knee,about=x,deg=0.5",
+                 f"joint_offset:joint={side}_ankle_roll,axis=z,mm=1.5"):
+        assert np.abs(equivalent(edit)).max() < 1e-6 * abs(turn), edit
+    # The ankle's body turned 0.3 deg about the ankle's own axis, as a chain's change.
+    c = np.deg2rad(0.3)
+    poe = kin.poe[side]
+    j = list(poe.cols).index(ankle)
+    M = poe.M.copy()
+    M[j] = poe.M[j] @ Exp(c * poe.S[j])
+    turned = copy.copy(kin)
+    turned.poe = {**kin.poe, side: replace(poe, M=M)}
+    got = offset_equivalent(ctx, fit, turned)
+    assert got[ankle] == pytest.approx(c, rel=1e-6) and np.abs(np.delete(got, ankle)).max() < 1e-6 * c
 
 
 def test_the_offsets_covariance_carries_the_imu_vertical_within_its_declared_bound():

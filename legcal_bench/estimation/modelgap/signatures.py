@@ -21,6 +21,7 @@ import numpy as np
 from legcal_bench.estimation.modelgap.effect_library import AXIS_TOLERANCE, LENGTH_TOLERANCE, ImuTilt
 from legcal_bench.estimation.modelgap.effects import Effect
 from legcal_bench.estimation.problem.residuals import project_mean
+from legcal_bench.geometry.lie import Log
 from legcal_bench.robots.kinematics import LegKinematics
 
 FAMILIES = ("angle", "load", "motion")
@@ -93,6 +94,26 @@ class LegGeometry(Effect):
                  for _ in self._places(kin) for c in TWIST]
                 + [(-AXIS_TOLERANCE, AXIS_TOLERANCE)] * len(self._tilts(kin)))
 
+    def values(self, kin: LegKinematics, edited: LegKinematics) -> np.ndarray:
+        """The parameters (`parameters` order) that take `kin`'s chain of this leg to
+        `edited`'s (the same robot with its geometry changed, e.g. a simulator's edited
+        model): each place's twist the log of its constant transform's change (the mount's
+        after M_0, a joint's before the next constant, as `factors` inserts them), each
+        axis tilt the least-squares rotation of the joint's motion subspace about its
+        tilt axes (first order: [tilt, S])."""
+        a, b = kin.poe[self.side], edited.poe[self.side]
+        after = lambda poe: [*poe.M[1:], poe.M_sole]  # noqa: E731 - the constant after each joint
+        places = [Log(np.linalg.inv(a.M[0]) @ b.M[0])] + [Log(B @ np.linalg.inv(A))
+                                                           for A, B in zip(after(a), after(b))]
+        tilts = self._tilts(kin)
+        tilt_values = np.zeros(len(tilts))
+        for k, S in enumerate(a.S):
+            mine = [i for i, (_, kk, _) in enumerate(tilts) if kk == k]
+            bracket = np.array([np.concatenate([np.cross(t[3:], S[:3]) - np.cross(S[3:], t[:3]), np.cross(t[3:], S[3:])])
+                                for t in (tilts[i][2] for i in mine)]).T
+            tilt_values[mine] = np.linalg.lstsq(bracket, b.S[k] - S, rcond=None)[0]
+        return np.concatenate([*places, tilt_values])
+
     def factors(self, kin: LegKinematics):
         places, tilts = self._places(kin), self._tilts(kin)
         n = 6 * len(places) + len(tilts)
@@ -138,6 +159,12 @@ GEOMETRY_FAMILIES = {
 def is_tilt(name: str) -> bool:
     """Whether a generic column (`EffectModel.names`) is a joint's axis tilt (`LegGeometry`)."""
     return name.startswith("leg_geometry_") and name.rsplit("_", 1)[0].endswith("_axis")
+
+
+def twist_place(name: str) -> str | None:
+    """The place (`leg_geometry_<side>.<place>`) whose twist a generic column
+    (`EffectModel.names`) is a component of; None for a tilt or another effect's column."""
+    return name.rsplit("_", 1)[0] if name.startswith("leg_geometry_") and not is_tilt(name) else None
 
 
 def _part(name: str) -> str:
