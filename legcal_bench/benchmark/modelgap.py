@@ -178,16 +178,23 @@ HELDOUT = 0
 COLLECT: dict = {}  # CollectConfig overrides of every case `run` makes (a test's shorter sessions); in its key
 
 
-def _collect(robot: str, specs: tuple[str, ...], seed: int, work: Path, mode: str = "weld", stances=None,
-             collect_overrides: dict | None = None):
+def _config(robot: str, specs: tuple[str, ...], seed: int, mode: str = "weld", stances=None,
+            collect_overrides: dict | None = None):
+    """A case's collection: a `CollectConfig`."""
+    from legcal_bench.protocol.collect import CollectConfig
+
+    return CollectConfig(**{"robot": robot, "mode": mode, "sensors": "calibrated-imu", "seed": seed,
+                            "heldout": HELDOUT, "effects": tuple(specs),
+                            **({"stances": tuple(stances)} if stances else {}), **(collect_overrides or {})})
+
+
+def _collect(cfg, work: Path):
+    """Collect `cfg` into `work`: (leg map, training recordings, truth)."""
     from legcal_bench.data.recording import list_segments, load_session, load_truth
-    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.protocol.collect import collect
     from legcal_bench.robots import load_robot
 
-    legmap = load_robot(robot)
-    cfg = CollectConfig(**{"robot": robot, "mode": mode, "sensors": "calibrated-imu", "seed": seed, "heldout": HELDOUT,
-                           "effects": tuple(specs), **({"stances": tuple(stances)} if stances else {}),
-                           **(collect_overrides or {})})
+    legmap = load_robot(cfg.robot, cfg.mjcf)
     collect(cfg, work / "set", progress=False)
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 
@@ -220,7 +227,8 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     cal = get_calibrator(cal_name, **dict(cal_options))
     with scratch_dir("modelgap") as work:
         mode = "kinematic" if kind == "clean_kinematic" else "weld"
-        legmap, recs, truth = _collect(robot, specs, seed, Path(work), mode, stances, collect)
+        cfg = _config(robot, specs, seed, mode, stances, collect)
+        legmap, recs, truth = _collect(cfg, Path(work))
         row = {"robot": legmap.name, "robot_spec": robot, "kind": kind, "name": name,
                "spec": " ".join(specs) or None, "seed": seed, "side": side, "scale": scale, "mode": mode}
         if kind == "reference":
@@ -236,7 +244,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
             row["at_truth"] = _chi2_at_truth(ctx, truth)
         # Outside the library, the truth scored is the injected offsets plus the edit's
         # own offset change (`offset_equivalent`: e.g. the zero a twisted link turns).
-        equivalent = (_offset_equivalent(ctx, legmap, specs, seed, start, Path(work)) if kind == "outside"
+        equivalent = (_offset_equivalent(ctx, cfg, start, Path(work)) if kind == "outside"
                       else np.zeros(len(names)))
     if kind == "outside":
         row["offset_equivalent_rad"] = dict(zip(names, equivalent.tolist()))
@@ -287,18 +295,17 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     return row
 
 
-def _offset_equivalent(ctx, legmap, specs, seed: int, start, work: Path) -> np.ndarray:
-    """(n,) rad: the offset change the effect `specs` makes to the robot's model
-    (`legcal_bench.evaluation.modelgap.offset_equivalent`), read off the simulator's
-    edited copy, which is made again here as `collect` made it (same specs and seed)."""
+def _offset_equivalent(ctx, cfg, start, work: Path) -> np.ndarray:
+    """(n,) rad: the offset change the collection `cfg`'s effects make to the robot's
+    model (`legcal_bench.evaluation.modelgap.offset_equivalent`), read off the simulated
+    robot's edited model, made again as `collect` made it (`config_reality`)."""
     from legcal_bench.estimation.problem.fit import fit_model
     from legcal_bench.evaluation.modelgap import offset_equivalent
+    from legcal_bench.protocol.collect import config_reality
     from legcal_bench.robots.kinematics import LegKinematics
-    from legcal_bench.sim.effects import build_reality
-    from legcal_bench.sim.sensors import SimSensors
 
-    edited = build_reality(legmap, legmap, specs, SimSensors(), work / "edited", seed).sim_legmap
-    return offset_equivalent(ctx, fit_model(ctx.prep, start=start), LegKinematics(edited))
+    _, reality = config_reality(cfg, work / "edited")
+    return offset_equivalent(ctx, fit_model(ctx.prep, start=start), LegKinematics(reality.sim_legmap))
 
 
 def _generic(g: dict | None) -> dict | None:

@@ -395,20 +395,29 @@ def _at_offsets(ctx: Context, fit, model: EffectModel) -> Evaluated:
 def offset_equivalent(ctx: Context, fit, edited) -> np.ndarray:
     """(n,) rad: the share of a geometry change that is, in these data, an offset change.
     The robot `edited` (the model's robot with its geometry changed: a `LegKinematics`,
-    e.g. of a simulator's edited copy) is the generic geometry's parameters
-    (`LegGeometry.values`). At each place, the combinations of its twist that are offsets
-    in these data (a turn about the joint's own axis; a move across the link that a pair
-    of parallel joints makes: the right singular directions of the place's columns,
-    scaled to unit size, beyond the offsets' span with singular values below
-    GEOMETRY_RTOL, at the offsets of `fit`) take their share of the change's twist there
-    (orthogonally, in those scaled units), and the shares are returned as the offsets
-    they are. No data tell them from an encoder's offsets, and every description of the
-    change the generic geometry holds carries them in its offsets: a link twisted about a
-    line not normal to its joints' axes turns a joint's zero with it. Per place: across
-    places, a twist's turn would mix with other places' combinations (on the A3-like, a
-    turn about the shank after the knee and about the hip yaw's axis, which runs through
-    the knee). An axis tilt is its own change, not read into this. The model-gap suite
-    adds this to the injected offsets it scores against (`legcal_bench.benchmark.modelgap`)."""
+    e.g. of a simulator's edited copy) is read as the generic geometry's parameters
+    (`LegGeometry.values`). At each place, the combinations of its twist that are
+    offsets in these data (a turn after a joint about its own axis; a move across a link
+    that two parallel joints make) take their share of the change's twist there, and the
+    shares are returned as the offsets they are. No data tell them from an encoder's
+    offsets, and the generic geometry's reduction (`identifiable`, at the same
+    GEOMETRY_RTOL) keeps none of them, so any description of the change by the twists
+    carries them in its offsets: a link twisted about a line not normal to its joints'
+    axes turns a joint's zero with it.
+
+    The combinations: the right singular directions of the place's columns (each scaled
+    to unit size, at the offsets of `fit`) beyond the offsets' span, with singular values
+    below GEOMETRY_RTOL; the share is the change's orthogonal projection on them in those
+    scaled units. Where a place's offset combinations are single columns (frames aligned
+    with the joints' axes, as on the A3-like, A2-like and G1 robots' knees) the split is
+    that of the columns; otherwise it depends on the scaling. Per place: across places, a
+    twist's turn would mix with other places' combinations (on the A3-like, a turn about
+    the shank after the knee and one about the hip yaw's axis, which runs through the
+    knee). The axis tilts are the change's own and are not read into it: a sparse
+    description that names a turned axis by its tilt carries none of the turn in its
+    offsets (by twists alone, a knee axis turned about z on the A3-like is a hip yaw
+    offset). The model-gap suite adds this to the injected offsets it scores against
+    (`legcal_bench.benchmark.modelgap`)."""
     kin = ctx.prep.kin
     full = EffectModel(kin, generic_effects())
     n_q = full.n_offsets

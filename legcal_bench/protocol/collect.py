@@ -31,11 +31,11 @@ from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, comm
                                           feasible_trajectory, fit_stance, load_protocol, posture_bounds,
                                           settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
-from legcal_bench.robots.legmap import SIDES
+from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
-from legcal_bench.sim.effects import build_reality, floor_stances
+from legcal_bench.sim.effects import Reality, build_reality, floor_stances
 from legcal_bench.sim.hold import HoldReport
 from legcal_bench.sim.offsets import paper_note, resolve_offsets
 from legcal_bench.sim.scene import MODES
@@ -340,14 +340,22 @@ def collect(cfg: CollectConfig, out_dir: str | Path, progress: bool = True) -> C
     hold a posture, IKError if a stance does not fit it."""
     check_config(cfg)  # again: a config's fields may have been changed since it was made
     out_dir = inputs.output_folder("out_dir", out_dir)
+    with scratch_dir("reality") as workdir:
+        legmap, reality = config_reality(cfg, workdir)
+        return _collect(cfg, out_dir, progress, legmap, reality)
+
+
+def config_reality(cfg: CollectConfig, workdir: str | Path) -> tuple[LegMap, Reality]:
+    """The model's robot (leg map) and the simulated reality `cfg` records from: its
+    simulated robot (`sim_robot`, `sim_model`; else the model's) with its effects applied,
+    an edited model written under `workdir`. `collect`'s; the model-gap suite reads the
+    same edited model to score against."""
     legmap = load_robot(cfg.robot, cfg.mjcf)
     sim_legmap = legmap
     if cfg.sim_robot is not None or cfg.sim_model is not None:
         sim_legmap = load_robot(cfg.sim_robot or cfg.robot, cfg.sim_model if cfg.sim_model else
                                 (None if cfg.sim_robot else cfg.mjcf))
-    with scratch_dir("reality") as workdir:
-        reality = build_reality(legmap, sim_legmap, cfg.effects, sim_sensors(cfg.sensors), workdir, cfg.seed)
-        return _collect(cfg, out_dir, progress, legmap, reality)
+    return legmap, build_reality(legmap, sim_legmap, cfg.effects, sim_sensors(cfg.sensors), workdir, cfg.seed)
 
 
 def standing_controller(cfg: CollectConfig, sim_legmap) -> str:

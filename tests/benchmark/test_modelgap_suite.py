@@ -186,6 +186,13 @@ def test_the_done_when_statistics_count_wrong_names_floors_and_attribution():
     assert "- r, knee_axis_tilted seed 1 (left leg): 0.5000 deg, 25.00x the floor (its seed's clean case: " \
            "0.0200 deg; the noise it states: – deg RMS, the error beyond it); says why: no; recommended –; " \
            "selected: selected because" in md
+    # The edit's own offset change, the largest over its cases' joints (deg), where the
+    # rows record it (made since the suite scores against it); none recorded: "–".
+    assert bent["offset_equivalent_deg"] is None and "| 0.2000 / 0.2000 | – |" in md
+    rows[5]["offset_equivalent_rad"] = {"a": np.deg2rad(0.001), "b": -np.deg2rad(0.0083)}
+    rows[6]["offset_equivalent_rad"] = {"a": np.deg2rad(0.004), "b": 0.0}
+    assert done_when(rows)["robots"]["r"]["edits"][0]["offset_equivalent_deg"] == pytest.approx(0.0083)
+    assert "| 0.0267 / 0.0310 | 0.0083 | 2/3 |" in markdown({"summary": summarize(rows), "rows": rows}, "m", "c")
     # A beyond case whose summary says its offsets are confounded counts as saying why;
     # so does one whose sparse description is not unique.
     rows[5]["summary"] = "unexplained; recommended offsets: generic's; the change it adds is partly confounded " \

@@ -330,14 +330,12 @@ def test_a_tilted_knee_axis_is_one_tilt_column_and_its_offsets_stay_at_the_floor
 def twisted_shank(tmp_path_factory):
     """The A3-like's shank twisted 1 deg about its axis (the suite's outside edit, seed
     3), a short set: (leg map, recordings, folder, spec, side), collected once per process."""
-    from legcal_bench.benchmark.modelgap import outside_spec
+    from legcal_bench.benchmark.modelgap import _collect, _config, outside_spec
 
     folder = tmp_path_factory.mktemp("twisted_shank")
     spec, side = outside_spec("shank_twisted", 3, robot="a3")
-    lm = load_robot("a3")
-    collect(CollectConfig(robot="a3", mode="weld", sensors="calibrated-imu", seed=3, heldout=0, effects=(spec,),
-                          stance_s=4.0), folder / "set", progress=False)
-    return lm, load_session(folder / "set", robot=lm), folder, spec, side
+    lm, recs, _ = _collect(_config("a3", (spec,), 3, collect_overrides={"stance_s": 4.0}), folder)
+    return lm, recs, folder, spec, side
 
 
 def test_a_sparse_description_another_explains_as_well_is_said_not_unique(twisted_shank):
@@ -375,12 +373,10 @@ def test_a_twisted_shank_turns_its_knee_zero_and_only_such_changes_count_as_offs
 
     import mujoco
 
+    from legcal_bench.benchmark.modelgap import _config, _offset_equivalent
     from legcal_bench.estimation.problem.fit import fit_model
     from legcal_bench.evaluation.modelgap import context, offset_equivalent
     from legcal_bench.geometry.lie import Exp
-    from legcal_bench.robots.kinematics import LegKinematics
-    from legcal_bench.sim.effects import build_reality
-    from legcal_bench.sim.sensors import sim_sensors
 
     lm, recs, _, spec, side = twisted_shank
     ctx = context(lm, recs)
@@ -389,9 +385,9 @@ def test_a_twisted_shank_turns_its_knee_zero_and_only_such_changes_count_as_offs
     names = list(lm.joint_names)
     knee, ankle = names.index(f"{side}_knee_joint"), names.index(f"{side}_ankle_pitch_joint")
 
-    def equivalent(edit):
-        real = LegKinematics(build_reality(lm, lm, [edit], sim_sensors("zero"), tmp_path / edit).sim_legmap)
-        return offset_equivalent(ctx, fit, real)
+    def equivalent(edit):  # as the suite reads it: the edited model made again from the case's collection
+        return _offset_equivalent(ctx, _config("a3", (edit,), 3, collect_overrides={"stance_s": 4.0}), None,
+                                  tmp_path / edit)
 
     m = mujoco.MjModel.from_xml_path(str(lm.model_file))
     d = mujoco.MjData(m)

@@ -21,7 +21,7 @@ import numpy as np
 from legcal_bench.estimation.modelgap.effect_library import AXIS_TOLERANCE, LENGTH_TOLERANCE, ImuTilt
 from legcal_bench.estimation.modelgap.effects import Effect
 from legcal_bench.estimation.problem.residuals import project_mean
-from legcal_bench.geometry.lie import Log
+from legcal_bench.geometry.lie import Ad, Exp, Log
 from legcal_bench.robots.kinematics import LegKinematics
 
 FAMILIES = ("angle", "load", "motion")
@@ -97,21 +97,29 @@ class LegGeometry(Effect):
     def values(self, kin: LegKinematics, edited: LegKinematics) -> np.ndarray:
         """The parameters (`parameters` order) that take `kin`'s chain of this leg to
         `edited`'s (the same robot with its geometry changed, e.g. a simulator's edited
-        model): each place's twist the log of its constant transform's change (the mount's
-        after M_0, a joint's before the next constant, as `factors` inserts them), each
-        axis tilt the least-squares rotation of the joint's motion subspace about its
-        tilt axes (first order: [tilt, S])."""
+        model): each place's twist the log of its constant transform's change (the
+        mount's after M_0, a joint's before the next constant, as `factors` inserts
+        them); each joint's axis tilts the rotation, about its anchor, that turns its
+        axis into the edited one (exact for one tilt a joint; two compose to first order
+        in the chain). Raises ValueError for a joint whose motion changed otherwise
+        (e.g. its anchor moved): no tilt describes that."""
         a, b = kin.poe[self.side], edited.poe[self.side]
-        after = lambda poe: [*poe.M[1:], poe.M_sole]  # noqa: E731 - the constant after each joint
         places = [Log(np.linalg.inv(a.M[0]) @ b.M[0])] + [Log(B @ np.linalg.inv(A))
-                                                           for A, B in zip(after(a), after(b))]
+                                                           for A, B in zip(_after_joints(a), _after_joints(b))]
         tilts = self._tilts(kin)
         tilt_values = np.zeros(len(tilts))
-        for k, S in enumerate(a.S):
-            mine = [i for i, (_, kk, _) in enumerate(tilts) if kk == k]
-            bracket = np.array([np.concatenate([np.cross(t[3:], S[:3]) - np.cross(S[3:], t[:3]), np.cross(t[3:], S[3:])])
-                                for t in (tilts[i][2] for i in mine)]).T
-            tilt_values[mine] = np.linalg.lstsq(bracket, b.S[k] - S, rcond=None)[0]
+        for k, (S, S_new) in enumerate(zip(a.S, b.S)):
+            w, w_new = S[3:] / np.linalg.norm(S[3:]), S_new[3:] / np.linalg.norm(S_new[3:])
+            c = np.cross(w, w_new)
+            r = c / np.linalg.norm(c) * np.arctan2(np.linalg.norm(c), w @ w_new) if np.any(c) else np.zeros(3)
+            anchor = np.cross(w, S[:3] / np.linalg.norm(S[3:]))
+            if np.abs(Ad(Exp(np.concatenate([np.cross(anchor, r), r]))) @ S - S_new).max() > 1e-9:
+                role = kin.legmap.joint_roles[int(a.cols[k])]
+                raise ValueError(f"{self.side} {role}: its motion changed in a way no axis tilt about its anchor "
+                                 f"describes (S {np.round(S, 6).tolist()} -> {np.round(S_new, 6).tolist()})")
+            for i, (_, kk, t) in enumerate(tilts):
+                if kk == k:
+                    tilt_values[i] = r @ t[3:]
         return np.concatenate([*places, tilt_values])
 
     def factors(self, kin: LegKinematics):
@@ -159,6 +167,12 @@ GEOMETRY_FAMILIES = {
 def is_tilt(name: str) -> bool:
     """Whether a generic column (`EffectModel.names`) is a joint's axis tilt (`LegGeometry`)."""
     return name.startswith("leg_geometry_") and name.rsplit("_", 1)[0].endswith("_axis")
+
+
+def _after_joints(poe) -> list[np.ndarray]:
+    """The constant transform after each joint of a leg's chain (`LegPoE`): the next
+    joint's frame, the sole's after the last."""
+    return [*poe.M[1:], poe.M_sole]
 
 
 def twist_place(name: str) -> str | None:
