@@ -303,8 +303,8 @@ def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
     from legcal_bench.reports.bench_speed import BASELINE, DEFAULT_GROUPS, GROUPS
 
     bs.add_argument("--groups", nargs="+", default=list(DEFAULT_GROUPS), choices=list(GROUPS), metavar="GROUP",
-                    help=f"what to time: {', '.join(GROUPS)} (default: {' '.join(DEFAULT_GROUPS)}; closed_loop, "
-                         "modelgap and tests take minutes to tens of minutes a round)")
+                    help=f"what to time: {', '.join(GROUPS)} (default: {' '.join(DEFAULT_GROUPS)}; the others "
+                         "take minutes to tens of minutes a round)")
     bs.add_argument("--robot", default="a3", help="the robot of the calibration and collection groups (default a3)")
     bs.add_argument("--repeats", type=int, default=None,
                     help="repeats per probe and round (default: calibration and startup 5, the others 1)")

@@ -18,6 +18,8 @@ rounds, on the same inputs:
   closed_loop  `closed_loop_probe.py`: the 35-trial closed-loop evaluation (wall);
   modelgap     `modelgap_probe.py`: `bench --suite modelgap --cases clean library --seeds
                2`, seconds per session set;
+  modelgap_outside  the same probe on `--cases outside --seeds 1 --robots a3` (the
+               geometric edits outside the library and their reference runs);
   tests        `tests_probe.py`: the test command (`python -m pytest` with each version's
                own tests and settings) in its source tree, wall, counts and the slowest 20.
 
@@ -54,6 +56,8 @@ GROUPS = {  # group -> (probe script, its extra arguments beyond --repeats, defa
     "startup": ("startup_probe.py", [], 5),
     "closed_loop": ("closed_loop_probe.py", [], 1),
     "modelgap": ("modelgap_probe.py", [], 1),
+    "modelgap_outside": ("modelgap_probe.py", ["--key", "modelgap_outside", "--cases", "outside", "--seeds", "1",
+                                               "--robots", "a3"], 1),
     "tests": ("tests_probe.py", [], 1),
 }
 DEFAULT_GROUPS = ("calibration", "collection", "startup")  # the quick ones (a few minutes); the rest take long
@@ -97,6 +101,8 @@ TARGETS = {
     "collect_weld_cpu": ("`legcal-bench collect --mode weld`, CPU s", None),
     "modelgap_per_set": ("model-gap suite, s per session set", _at_most(4.0)),
     "modelgap_total": ("model-gap suite `--cases clean library --seeds 2`, s", None),
+    "modelgap_outside_per_set": ("model-gap suite outside the library, s per session set", None),
+    "modelgap_outside_total": ("model-gap suite `--cases outside --seeds 1 --robots a3`, s", None),
     "test_suite": ("test command (`python -m pytest`), s", _at_most(300.0)),
 }
 RATES = ("frames_per_s", "x_real_time")  # cases where more is faster

@@ -1,10 +1,11 @@
 """Time the model-gap suite with whatever `legcal_bench` is importable (issue #36).
 
 Run as a script (`python modelgap_probe.py --repeats N`), it runs
-`legcal-bench bench --suite modelgap --cases clean library --seeds 2` in this process
-(`legcal_bench.cli.main`) into a temporary folder, N times, and prints one JSON object:
-the wall seconds of each run (`modelgap_total`) and per session set
-(`modelgap_per_set`), and the number of session sets a run diagnoses (`sets`). It uses
+`legcal-bench bench --suite modelgap --cases clean library --seeds 2` (or the `--cases`,
+`--seeds` and `--robots` given) in this process (`legcal_bench.cli.main`) into a
+temporary folder, N times, and prints one JSON object: the wall seconds of each run
+(`<key>_total`, `--key`, default `modelgap`) and per session set (`<key>_per_set`), and
+the number of session sets a run diagnoses (`sets`). It uses
 only the command line, so it runs on an older commit installed beside the code at hand
 (`PYTHONPATH=<site> python modelgap_probe.py`), for a comparison in the same run.
 
@@ -69,6 +70,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--robots", nargs="+", default=None, help="default: the suite's")
     p.add_argument("--workers", type=int, default=None, help="default: the command's")
     p.add_argument("--save", default=None, help="copy the last run's modelgap.json here (to compare results)")
+    p.add_argument("--key", default="modelgap", help="the cases' names: <key>_per_set, <key>_total")
     a = p.parse_args(argv)
     extra = (["--robots", *a.robots] if a.robots else []) + (["--workers", str(a.workers)] if a.workers else [])
     import legcal_bench
@@ -79,8 +81,8 @@ def main(argv: list[str] | None = None) -> int:
         totals.append(wall)
         sets = n
         print(f"modelgap: {n} sets in {wall:.1f} s ({wall / n:.2f} s a set)", file=sys.stderr)
-    print(json.dumps({"cases": {"modelgap_per_set": {"unit": "s", "values": [t / sets for t in totals]},
-                                "modelgap_total": {"unit": "s", "values": totals}},
+    print(json.dumps({"cases": {f"{a.key}_per_set": {"unit": "s", "values": [t / sets for t in totals]},
+                                f"{a.key}_total": {"unit": "s", "values": totals}},
                       "sets": sets, "module": os.path.dirname(legcal_bench.__file__)}))
     return 0
 
