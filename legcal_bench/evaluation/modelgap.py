@@ -433,10 +433,10 @@ def offset_equivalent(ctx: Context, fit, edited) -> np.ndarray:
     for cols in places.values():
         if not np.any(g[cols]):
             continue
-        C = at0.Jw[:, cols] / np.linalg.norm(at0.Jw[:, cols], axis=0)
+        size = np.linalg.norm(at0.Jw[:, cols], axis=0)
+        C = at0.Jw[:, cols] / size
         _, sv, Vt = np.linalg.svd(C - Q @ (Q.T @ C), full_matrices=False)
         E = Vt[sv <= GEOMETRY_RTOL]  # orthonormal, in the scaled parameters
-        size = np.linalg.norm(at0.Jw[:, cols], axis=0)
         share[cols] = E.T @ (E @ (g[cols] * size)) / size
     return np.linalg.lstsq(N, at0.Jw @ share, rcond=None)[0]
 
@@ -892,8 +892,8 @@ def _recommended_text(rep: dict) -> str:
         whole = next((c for c in rep["candidates"] if c.get("name") == GENERIC), None)
         if rec.get("name") == SPARSE and whole and whole.get("offsets_std_rms_rad"):
             # The sparse fit holds its few columns for the whole change; a change its
-            # columns describe only nearly moves the offsets along combinations it calls
-            # well determined (the model-gap suite's twisted shank on the A3-like robot).
+            # columns describe only nearly would move the offsets along combinations it
+            # calls well determined, which the generic geometry's noise allows for.
             text += (f"; that noise holds the sparse description for exact: the generic geometry's, which does "
                      f"not, is {np.rad2deg(whole['offsets_std_rms_rad']):.4f} deg RMS")
     ties = (rep.get("generic") or {}).get("sparse_ties") or []
