@@ -137,37 +137,92 @@ def known_keys(where: str, mapping: dict, allowed, fix: str = "") -> None:
                       f"{', '.join(map(str, allowed))}" + (f" ({fix})" if fix else ""))
 
 
+PROBE_PREFIX = ".legcal-probe-"  # the probe file `output_folder` creates and deletes at once
+
+
 def output_folder(field: str, path) -> Path:
-    """An output folder that can be written: an existing folder we may write into, or
-    one that can be made under the nearest existing folder. Checked before the work,
-    so that a long run does not end on an unwritable path. Nothing is created here."""
+    """An output folder that can be written, proved by writing, before the work (so that
+    a long run does not end on an unwritable path; `os.access` would not do: as root it
+    says yes to every folder, and it knows nothing of read-only or virtual file systems).
+
+    It creates the missing folders of `path`, then creates and deletes a probe file
+    (`PROBE_PREFIX`...) in `path`, then removes again the folders it created (each only
+    if still empty: a folder another process wrote into meanwhile stays). An existing
+    folder is left as it was. Refused with a ConfigError naming `field`, the path, the
+    operating system's reason and the fix: a file where the folder or one of its parents
+    should be, a folder that cannot be made, a folder no file can be written into."""
     if path is None or str(path).strip() == "":
         raise ConfigError(f"{field}: no folder given (give a folder to write into)")
     p = Path(path).expanduser()
     if p.exists() and not p.is_dir():
         raise ConfigError(f"{field} {str(path)!r}: is a file, not a folder (give a folder to write into)")
-    probe = p
-    while not probe.exists():
-        if probe.parent == probe:
-            break
-        probe = probe.parent
-    if not probe.is_dir():
-        raise ConfigError(f"{field} {str(path)!r}: {str(probe)!r} is a file, so the folder cannot be made there "
-                          f"(give a folder path)")
-    if not os.access(probe, os.W_OK | os.X_OK):
-        raise ConfigError(f"{field} {str(path)!r}: {str(probe)!r} is not writable (give a folder you can write to)")
+    _writable(field, str(path), p)
     return p
 
 
 def output_file(field: str, path) -> Path:
-    """A file that can be written: not a folder, its folder writable or makeable."""
+    """A file that can be written: not a folder, and its folder writable (`output_folder`'s
+    probe, the same folders created and removed again); the file itself is not touched."""
     if path is None or str(path).strip() == "":
         raise ConfigError(f"{field}: no file given")
     p = Path(path).expanduser()
     if p.is_dir():
         raise ConfigError(f"{field} {str(path)!r}: is a folder, not a file (give a file path)")
-    output_folder(field, p.parent if str(p.parent) else ".")
+    folder = p.parent if str(p.parent) else Path(".")
+    if folder.exists() and not folder.is_dir():
+        raise ConfigError(f"{field} {str(path)!r}: {str(folder)!r} is a file, so the file cannot be made in it "
+                          f"(give a path in a folder)")
+    _writable(field, str(path), folder)
     return p
+
+
+def _writable(field: str, given: str, folder: Path) -> None:
+    """Prove `folder` writable: make its missing parents and itself, create and delete a
+    probe file in it, remove the folders made (`output_folder`)."""
+    import tempfile  # on the check's path only: the CLI's start-up stays light
+
+    missing = []
+    nearest = folder
+    while not nearest.exists() and not nearest.is_symlink():
+        missing.append(nearest)
+        if nearest.parent == nearest:
+            break
+        nearest = nearest.parent
+    if nearest.exists() and not nearest.is_dir():
+        raise ConfigError(f"{field} {given!r}: {str(nearest)!r} is a file, so the folder cannot be made there "
+                          f"(give a folder path)")
+    made = []
+    try:
+        for d in reversed(missing):
+            try:
+                d.mkdir()
+            except FileExistsError:
+                if not d.is_dir():
+                    raise
+                continue  # made meanwhile by another process: not ours to remove
+            made.append(d)
+    except OSError as e:
+        _remove(made)
+        raise ConfigError(f"{field} {given!r}: cannot make the folder {str(d)!r} ({e.strerror or e}); give a folder "
+                          f"you can write to") from None
+    try:
+        fd, probe = tempfile.mkstemp(prefix=PROBE_PREFIX, dir=folder)
+    except OSError as e:
+        _remove(made)
+        raise ConfigError(f"{field} {given!r}: cannot write into {str(folder)!r} ({e.strerror or e}); give a folder "
+                          f"you can write to") from None
+    os.close(fd)
+    os.unlink(probe)
+    _remove(made)
+
+
+def _remove(made: list[Path]) -> None:
+    """The folders `_writable` made, deepest first, each only if still empty."""
+    for d in reversed(made):
+        try:
+            d.rmdir()
+        except OSError:
+            return  # not empty (another process wrote into it): it and its parents stay
 
 
 def read_text(field: str, path, what: str = "file") -> str:

@@ -48,23 +48,55 @@ def test_unknown_keys_are_named_with_the_closest():
     inputs.known_keys("p", {"stances": 1}, ["stances"])
 
 
-def test_output_folders_are_checked_before_the_work(tmp_path, monkeypatch):
+def test_output_folders_are_checked_before_the_work(tmp_path):
     assert inputs.output_folder("--out", tmp_path / "a" / "b") == tmp_path / "a" / "b"
-    assert not (tmp_path / "a").exists()  # nothing made
+    assert not (tmp_path / "a").exists()  # the folders the probe made are removed again
     (tmp_path / "f").write_text("x")
     with pytest.raises(ConfigError, match="is a file, not a folder"):
         inputs.output_folder("--out", tmp_path / "f")
     with pytest.raises(ConfigError, match="is a file, so the folder cannot be made"):
         inputs.output_folder("--out", tmp_path / "f" / "sub")
-    # A folder the user may not write into (as root every folder is writable, so the
-    # permission is the check's to read, not the file system's to refuse).
-    ro = tmp_path / "ro"
-    ro.mkdir()
-    real = os.access
-    monkeypatch.setattr(os, "access", lambda path, mode: False if Path(path) == ro else real(path, mode))
-    with pytest.raises(ConfigError, match=r"ro' is not writable \(give a folder you can write to\)"):
-        inputs.output_folder("--out", ro / "x")
     inputs.output_folder("--out", tmp_path / "x")  # a writable one passes
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]  # no probe file left
+
+
+def test_a_folder_no_file_can_be_made_in_is_refused_with_the_reason_although_os_access_says_yes():
+    # /proc takes no new folder, not even from root (for whom os.access says yes to all).
+    assert os.access("/proc", os.W_OK | os.X_OK) or os.geteuid() != 0
+    with pytest.raises(ConfigError, match=r"--out '/proc/nope/x': cannot make the folder '/proc/nope' "
+                                          r"\(No such file or directory\); give a folder you can write to"):
+        inputs.output_folder("--out", "/proc/nope/x")
+    with pytest.raises(ConfigError, match=r"--urdf-out '/proc/nope/r.urdf': cannot make the folder '/proc/nope'"):
+        inputs.output_file("--urdf-out", "/proc/nope/r.urdf")
+    # An existing folder no file can be written into: the probe file's failure, with its reason.
+    with pytest.raises(ConfigError, match=r"--out '/proc/self': cannot write into '/proc/self' \(.+\); give a"):
+        inputs.output_folder("--out", "/proc/self")
+
+
+def test_an_output_file_needs_a_folder_and_is_not_touched(tmp_path):
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ConfigError, match="is a file, so the file cannot be made in it"):
+        inputs.output_file("--out", tmp_path / "f" / "r.json")
+    with pytest.raises(ConfigError, match="is a folder, not a file"):
+        inputs.output_file("--out", tmp_path)
+    assert inputs.output_file("--out", tmp_path / "f") == tmp_path / "f"  # an existing file may be replaced
+    assert (tmp_path / "f").read_text() == "x"
+    inputs.output_file("--out", tmp_path / "new" / "deeper" / "r.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["f"]
+
+
+def test_a_folder_another_process_wrote_into_meanwhile_stays(tmp_path, monkeypatch):
+    import tempfile
+
+    real = tempfile.mkstemp
+
+    def mkstemp(**kw):  # another process writes into the made folder during the probe
+        (tmp_path / "a" / "theirs").write_text("y")
+        return real(**kw)
+
+    monkeypatch.setattr(tempfile, "mkstemp", mkstemp)
+    inputs.output_folder("--out", tmp_path / "a" / "b")
+    assert sorted(p.name for p in (tmp_path / "a").iterdir()) == ["theirs"]
 
 
 def test_text_files_are_utf8_and_files(tmp_path):
