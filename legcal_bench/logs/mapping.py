@@ -22,6 +22,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from legcal_bench.data.recording import MAX_RATE_HZ, MIN_RATE_HZ
 from legcal_bench.errors import ConfigError, LogImportError, SensorModelError
 from legcal_bench.inputs import is_finite_number, read_text, shown
 from legcal_bench.robots.legmap import LegMap
@@ -35,6 +36,18 @@ GYRO_UNITS = {"rad/s": 1.0, "deg/s": np.pi / 180.0}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
 MOTIONS = ("static", "continuous")
 SIDES = ("left", "right")
+# The most frames an import aligns onto one clock, and the most samples it reads per
+# stream: the import holds about 1.6-1.9 kB per frame at its peak (measured on the A3,
+# clock 2000-4000 Hz, no F/T) and takes about 55 us per frame, so 2 million frames is
+# about 3.8 GB and 2 minutes: 11 h at 50 Hz, 33 min at 1 kHz. A longer log is refused
+# before it is read or aligned (a lower `clock`, or the log cut into parts, fits).
+MAX_FRAMES = 2_000_000
+
+
+def too_many(n: int, what: str, fix: str) -> LogImportError:
+    """The refusal of a log that would give `n` frames or samples (> MAX_FRAMES)."""
+    return LogImportError(f"{what} would give {n:,} frames, more than this import holds ({MAX_FRAMES:,}: about "
+                          f"1.9 kB each at its peak, so {MAX_FRAMES * 1.9e3 / 1e9:.1f} GB): {fix}")
 
 
 @dataclass(frozen=True)
@@ -223,6 +236,10 @@ def load_mapping(path: str | Path, legmap: LegMap, table: bool) -> LogMapping:
     clock = d.get("clock", "joints")
     if clock != "joints":
         clock = w.number(clock, "clock")
+        if not MIN_RATE_HZ < clock < MAX_RATE_HZ:  # the recordings' rule (legcal_bench.data.recording)
+            raise w.err("clock", f"is {clock:g} Hz, outside {MIN_RATE_HZ:g}-{MAX_RATE_HZ:g} Hz (exclusive), "
+                        "the rates a recording takes: give `joints` (the joint states' own stamps) or a rate "
+                        "such as 100 (the calibration needs no more)")
     sensor = _sensor_model(w, d["sensor_model"])
     motion = d.get("motion")
     if motion is not None:
