@@ -80,6 +80,7 @@ def import_log(logs: list[str | Path], map_path: str | Path, legmap: LegMap, out
     aligned = align(streams, mapping)
     kin = LegKinematics(legmap)
     found = detect(aligned, kin, mapping.detection, _knees(legmap), legmap.knee_straight_rad, ranges)
+    _check_degrees(found, aligned, mapping, legmap)
     names = [s.name for s in found.segments]
     for h in heldout or []:
         if h not in names:
@@ -134,6 +135,26 @@ def import_log(logs: list[str | Path], map_path: str | Path, legmap: LegMap, out
 
     replace_dir(out, write, keep_if=is_session_dir)
     return summary
+
+
+def _check_degrees(found: Detected, aligned, mapping, legmap: LegMap) -> None:
+    """Joints declared in degrees whose readings never leave +-2 pi (so, as degrees, the
+    legs barely move: under 6.3 deg at every such joint over the whole log), in a log where
+    fewer than two foot placements are found: the readings are radians. Refused, named."""
+    deg = [i for i, n in enumerate(legmap.joint_names) if mapping.joint_map[n].scale != 1.0]
+    if not deg or len({s.stance for s in found.segments if s.kind == "stance"}) >= 2:
+        return
+    reading = np.abs(aligned.q_enc[:, deg]) / np.array([mapping.joint_map[legmap.joint_names[i]].scale for i in deg])
+    if reading.max() > 2 * np.pi or not reading.max() > 0:
+        return
+    names = [legmap.joint_names[i] for i in deg]
+    raise LogImportError(
+        f"{mapping.path}: field 'joints.map.{names[0]}.unit' is deg"
+        + (f" (and {len(names) - 1} more joints)" if len(names) > 1 else "")
+        + f", but the readings of {'these joints' if len(names) > 1 else 'it'} stay within +-{reading.max():.3g} over "
+        f"the whole log ({aligned.time[-1]:.1f} s): as degrees the legs would barely move (under "
+        f"{reading.max():.2g} deg), and the import finds no two distinct foot placements; the readings are radians: "
+        "write `unit: rad`")
 
 
 def _warnings(found: Detected, aligned, mapping) -> list[str]:

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.errors import LogImportError
-from legcal_bench.logs.mapping import SIDES, LogMapping
+from legcal_bench.logs.mapping import MAX_FRAMES, SIDES, LogMapping, too_many
 
 BAG_SUFFIXES = (".mcap", ".db3", ".bag")
 TABLE_SUFFIXES = (".csv", ".parquet")
@@ -153,21 +153,86 @@ def _read_bags(paths: list[Path], mapping: LogMapping, joint_names: list[str]) -
         keys_of = {}  # one topic may feed several streams (e.g. a vendor's state message)
         for k, t in wanted.items():
             keys_of.setdefault(t, []).append(k)
+        from rosbags.rosbag2.errors import ReaderError
         from tqdm import tqdm
 
+        _check_bag_size(reader, conns, mapping, paths)
         total = sum(c.msgcount for c in conns)
-        for conn, receive_ns, data in tqdm(reader.messages(connections=conns), total=total, unit="msg",
-                                           desc="reading", disable=total < 20000, leave=False):
-            try:
-                msg = reader.deserialize(data, conn.msgtype)
-            except Exception as e:  # noqa: BLE001
-                raise LogImportError(f"topic {conn.topic} ({conn.msgtype}): a message cannot be decoded ({e}); "
-                                     "if it is a custom type, give its .msg under 'messages'") from None
-            for k in keys_of[conn.topic]:
-                raw[k].append((_stamp_ns(msg, receive_ns, mapping, f"topic {conn.topic} ({conn.msgtype})"), msg))
+
+        def read(messages) -> None:
+            for conn, receive_ns, data in tqdm(messages, total=total, unit="msg", desc="reading",
+                                               disable=total < 20000, leave=False):
+                try:
+                    msg = reader.deserialize(data, conn.msgtype)
+                except Exception as e:  # noqa: BLE001
+                    raise LogImportError(f"topic {conn.topic} ({conn.msgtype}): a message cannot be decoded ({e}); "
+                                         "if it is a custom type, give its .msg under 'messages'") from None
+                for k in keys_of[conn.topic]:
+                    raw[k].append((_stamp_ns(msg, receive_ns, mapping, f"topic {conn.topic} ({conn.msgtype})"),
+                                   msg))
+
+        try:
+            read(reader.messages(connections=conns))
+        except ReaderError as e:
+            if "not in timestamp order" not in str(e):
+                raise LogImportError(f"--log {', '.join(map(str, paths))}: cannot be read as a bag ({e})") from None
+            # An unindexed MCAP (a streaming writer's: no summary or index section) whose
+            # messages are not in log-time order: read it front to back, sorted by log time.
+            for v in raw.values():
+                v.clear()
+            read(_unindexed_messages(reader, conns, paths, e))
     finally:
         reader.close()
     return _assemble_bag(raw, mapping, joint_names)
+
+
+def _check_bag_size(reader, conns, mapping: LogMapping, paths: list[Path]) -> None:
+    """Refuse, from the bag's own counts and span (before any message is read), a log whose
+    streams or clock would exceed MAX_FRAMES."""
+    logs = ", ".join(map(str, paths))
+    for c in conns:
+        if c.msgcount > MAX_FRAMES:
+            raise too_many(c.msgcount, f"--log {logs}: topic {c.topic} ({c.msgcount:,} messages)",
+                           "cut the log into parts (e.g. `ros2 bag convert` or `mcap filter` with start and end "
+                           "times) and import each")
+    if mapping.clock != "joints":
+        span_s = max(int(reader.duration), 0) * 1e-9  # receive times: the header stamps come with the messages
+        n = int(span_s * float(mapping.clock)) + 1
+        if n > MAX_FRAMES:
+            raise too_many(n, f"{mapping.path}: field 'clock' {mapping.clock:g} Hz over the log's {span_s:.1f} s",
+                           "give a lower rate, or cut the log into parts")
+
+
+def _unindexed_messages(reader, conns, paths: list[Path], error: Exception):
+    """The messages of unindexed MCAP files, read linearly (rosbags' own scan of the data
+    section) and sorted by log (receive) time; a bag this cannot read is refused, named."""
+    from rosbags.rosbag2.storage_mcap import McapReader
+
+    logs = ", ".join(map(str, paths))
+
+    def refuse(why: str) -> LogImportError:
+        return LogImportError(
+            f"--log {logs}: an unindexed MCAP (no summary or index section: a streaming writer's, or a recording "
+            f"cut short) whose messages are not in log-time order ({error}), and {why}; rebuild its index with "
+            "`mcap recover IN.mcap -o OUT.mcap` (the mcap CLI) and import OUT.mcap")
+
+    want = {(c.topic, c.msgtype): c for c in conns}
+    out = []
+    for r in getattr(reader, "readers", []):
+        storage = getattr(r, "storage", None)
+        storages = getattr(storage, "storages", None) or [storage]
+        if getattr(getattr(storage, "metadata", None), "compression_mode", None) == "message":
+            raise refuse("its messages are compressed one by one, which this reader does not scan")
+        for st in storages:
+            if not isinstance(st, McapReader) or not hasattr(st, "messages_scan"):
+                raise refuse(f"{type(st).__name__} storage cannot be read front to back here")
+            mine = [c for c in st.connections if (c.topic, c.msgtype) in want]
+            try:
+                out += [(want[(c.topic, c.msgtype)], ts, data) for c, ts, data in st.messages_scan(mine)]
+            except Exception as e:  # noqa: BLE001 - rosbags' ReaderError and decompression errors
+                raise refuse(f"reading it front to back failed too ({e})") from None
+    out.sort(key=lambda m: m[1])  # stable: messages of one log time keep their file order
+    return out
 
 
 def _assemble_bag(raw: dict, mapping: LogMapping, joint_names: list[str]) -> Streams:
@@ -196,6 +261,15 @@ def _assemble_bag(raw: dict, mapping: LogMapping, joint_names: list[str]) -> Str
             idx = cache.get(names)
             if idx is None:
                 lookup = {n: i for i, n in enumerate(names)}
+                twice = [(n, jm[n].source) for n in joint_names if names.count(jm[n].source) > 1]
+                if twice:
+                    leg, src = twice[0]
+                    at = [i for i, n in enumerate(names) if n == src]
+                    raise LogImportError(
+                        f"{where}: joint name {src!r} (field 'joints.map.{leg}.source' in {mapping.path}) appears "
+                        f"{len(at)} times in one message, at positions {at} of field '{names_path}': which position "
+                        f"is the joint cannot be told; fix the logger's joint names, or map by index (`names: null` "
+                        f"and each source the joint's position): {list(names)}")
                 missing = [(n, jm[n].source) for n in joint_names if jm[n].source not in lookup]
                 if missing:
                     raise LogImportError(
@@ -301,6 +375,9 @@ def _read_tables(paths: list[Path], mapping: LogMapping, joint_names: list[str])
         t0_raw = float(t_raw.min())
         t = (t_raw - t0_raw) * mapping.time_scale
     t0_ns = int(round(t0_raw * mapping.time_scale * 1e9))
+    if t.size > MAX_FRAMES:
+        raise too_many(t.size, f"--log {', '.join(map(str, paths))}: {t.size:,} rows",
+                       "cut the table into parts by time and import each")
 
     def stream(columns: list[str], field: str):
         for c in columns:
