@@ -38,6 +38,14 @@ def cmd_import(a: argparse.Namespace) -> int:
 
 
 def cmd_simulate_log(a: argparse.Namespace) -> int:
+    from legcal_bench.errors import ConfigError
+
+    if a.mjcf is not None:
+        # The long log walks and steps with the robot's frozen walking policy and its teacher,
+        # trained on the leg map's own model: another MJCF is not simulated here.
+        raise ConfigError(f"--mjcf {a.mjcf}: simulate-log simulates the leg map's own model (its walking policy "
+                          "was trained on it) and does not take another MJCF; leave --mjcf out, or give --robot a "
+                          "leg-map YAML of a robot with a frozen walker (policies/walkers/)")
     door(a, out=inputs.output_folder, seed=inputs.seed, sensors=partial(inputs.choice, options=SENSOR_PRESET_NAMES))
     from legcal_bench.api.logs import simulate_log
 
