@@ -22,11 +22,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from legcal_bench.data.recording import Recording, training
+from legcal_bench.data.recording import Recording, session_identity, training
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.checks.motion import resolve_motion
 from legcal_bench.estimation.imu.imu_motion import IMU_MODES
 from legcal_bench.estimation.problem.preprocess import PreprocessConfig
+from legcal_bench.estimation.verdict import LIMITS, Finding, check_verdict, judge
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
@@ -47,6 +48,27 @@ class CalibrationResult:
     timing_s: dict[str, float] = field(default_factory=dict)
     settings: dict[str, Any] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    # Whether to apply the offsets (`legcal_bench.estimation.verdict`): {"verdict": apply |
+    # review | do-not-apply, "reasons": each warning with its meaning, "counts"}; set by
+    # the framework (`calibrate_training`), kept as written when read back.
+    verdict: dict[str, Any] = field(default_factory=dict)
+    # The session set it was calibrated on (`session_identity`): sessions, recordings, sha256.
+    session: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self):
+        if not self.verdict:
+            self.judge()
+
+    def judge(self) -> dict:
+        """The verdict of the result's warnings, set and returned (their classes are
+        the checks'; a warning no check classed is a doubt)."""
+        self.verdict = judge(self.warnings)
+        return self.verdict
+
+    @property
+    def decision(self) -> str:
+        """"apply", "review" or "do-not-apply" (`verdict`'s reasons say why)."""
+        return self.verdict["verdict"]
 
     def to_dict(self) -> dict:
         return {"format": RESULT_FORMAT, "version": 1, **asdict(self)}
@@ -79,10 +101,16 @@ class CalibrationResult:
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
                 raise CalibrationError(f"{path}: offsets_rad.{k} must be a finite number of radians, got {v!r}")
         for k, want in (("pitch_sums_rad", dict), ("conditioning", dict), ("diagnostics", dict),
-                        ("timing_s", dict), ("settings", dict), ("warnings", list)):
+                        ("timing_s", dict), ("settings", dict), ("warnings", list), ("verdict", dict),
+                        ("session", dict)):
             if k in d and not isinstance(d[k], want):
                 raise CalibrationError(f"{path}: field '{k}' must be a JSON {'object' if want is dict else 'list'}")
-        return cls(**d)
+        if d.get("verdict"):
+            try:
+                check_verdict(d["verdict"], str(path))
+            except ValueError as e:
+                raise CalibrationError(str(e)) from None
+        return cls(**d)  # a result written before verdicts is judged now, its warnings unclassed
 
     def check_robot(self, legmap: LegMap, source: str = "the result") -> None:
         """A result used on a robot (scored, a correction, a start) must have been
@@ -94,6 +122,23 @@ class CalibrationResult:
             raise CalibrationError(
                 f"{source}: calibrated for robot {self.robot!r}, but the robot here is {legmap.name!r}: its offsets "
                 f"are {self.robot}'s; give a result calibrated for {legmap.name}, or --robot {spec}")
+
+    def check_session(self, recordings: list[Recording], source: str) -> None:
+        """A result scored, reported or exported against a session set must have been
+        calibrated on it: CalibrationError naming `source` (the option and folder) when
+        the set's training recordings are not the ones the result records. A result
+        without a recorded session (written before they were recorded) passes."""
+        if not self.session.get("sha256"):
+            return
+        here = session_identity(recordings)
+        if here["sha256"] != self.session["sha256"]:
+            def shown(ident):
+                return (", ".join(ident.get("sessions") or []) or "unlabelled") + \
+                    f" ({len(ident.get('recordings', []))} recordings, sha256 {ident['sha256'][:12]})"
+            raise CalibrationError(
+                f"{source}: the result was calibrated on session set {shown(self.session)}, but these are other "
+                f"recordings: {shown(here)}; give the session set it was calibrated on, or calibrate this one "
+                "(legcal-bench calibrate --bags ...)")
 
     def offsets_vector(self, joint_names: list[str]) -> np.ndarray:
         missing = [n for n in joint_names if n not in self.offsets_rad]
@@ -140,13 +185,16 @@ def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[R
     each recording's motion is measured and resolved (`resolve_motion`: a declaration
     the data contradict is replaced, with a warning; the evidence in
     `diagnostics["motion"]`), and a result calibrated on recordings without a declared
-    sensor model says so in its warnings."""
+    sensor model says so in its warnings. The result records the set it was calibrated
+    on (`session_identity`) and gets its verdict (`CalibrationResult.judge`) here."""
     recs = training(recordings)
     evidence: dict = {}
     recs, motion_warnings = resolve_motion(LegKinematics(robot), recs, evidence)
     result = calibrator.calibrate(robot, recs)
     result.warnings = [*result.warnings, *motion_warnings, *undeclared_sensor_warnings(recs)]
     result.diagnostics.setdefault("motion", evidence)
+    result.session = session_identity(recs)
+    result.judge()
     return result
 
 
@@ -157,10 +205,10 @@ def undeclared_sensor_warnings(recordings: list[Recording]) -> list[str]:
     names = [r.name for r in recordings if not r.sensor_declared]
     if not names:
         return []
-    return [f"sensor model not declared in {len(names)} recording(s) ({', '.join(names)}): calibrated with "
-            f"conservative bounds ({SensorModel.unknown().describe()}; SI units), which widen the uncertainty and "
-            "the IMU-tilt bound; declare the sensors' datasheet values in the recordings' sensor_model "
-            "(docs/recording-format.md) for a calibration as tight as the sensors allow"]
+    return [Finding(f"sensor model not declared in {len(names)} recording(s) ({', '.join(names)}): calibrated with "
+                    f"conservative bounds ({SensorModel.unknown().describe()}; SI units), which widen the uncertainty "
+                    "and the IMU-tilt bound; declare the sensors' datasheet values in the recordings' sensor_model "
+                    "(docs/recording-format.md) for a calibration as tight as the sensors allow", LIMITS)]
 
 
 def number_option(name: str, value: Any, low: float | None = None, high: float | None = None, *,

@@ -49,6 +49,7 @@ from legcal_bench.estimation.problem.fit import (GLS_MAX_CHI2_PER_DOF, fit_effec
 from legcal_bench.estimation.problem.stance import (JACOBIANS, MATCHED, SENSOR, SOLVERS, FitOptions,
                                                     InterFootWeights, Prepared, StanceProblem, prepare,
                                                     sensor_weights)
+from legcal_bench.estimation.verdict import DOUBTS, HARMLESS, LIMITS, Finding
 from legcal_bench.robots.kinematics import pitch_sums
 from legcal_bench.robots.legmap import LegMap
 
@@ -142,11 +143,12 @@ class InterFootCalibrator(Calibrator):
         if self.contact_check != "off":
             contacts = contact_check(prep, problem.segments, dq, solved=True)
             flagged = [c for c in contacts or [] if c.flagged]
-            warnings += [c.text() for c in flagged]
+            warnings += [Finding(c.text(), DOUBTS) for c in flagged]
             kept = [s for s in problem.segments if s.recording not in {c.recording for c in flagged}]
             if flagged and self.contact_check == "drop" and len({s.recording for s in kept}) < 2:
-                warnings.append(f"contact_check=drop: not dropped: fewer than two stances would be left of "
-                                f"{len(contacts)}; these data do not fit soles on one flat floor (re-record)")
+                warnings.append(Finding(f"contact_check=drop: not dropped: fewer than two stances would be left of "
+                                        f"{len(contacts)}; these data do not fit soles on one flat floor (re-record)",
+                                        DOUBTS))
             elif flagged and self.contact_check == "drop":
                 dropped = [c.recording for c in flagged]
                 problem.build(kept)
@@ -154,10 +156,11 @@ class InterFootCalibrator(Calibrator):
                 hist2 += hist3
                 # A fit with effects starts from the same stances.
                 prep = replace(prep, segments=[s for s in prep.segments if s.recording not in dropped])
-                warnings.append(f"contact_check=drop: fitted without {', '.join(dropped)}")
+                warnings.append(Finding(f"contact_check=drop: fitted without {', '.join(dropped)}", LIMITS))
             elif flagged:
-                warnings.append("contact_check: rerun with --option contact_check=drop to fit without "
-                                f"{', '.join(c.recording for c in flagged)}, or re-record on a flat floor")
+                warnings.append(Finding("contact_check: rerun with --option contact_check=drop to fit without "
+                                        f"{', '.join(c.recording for c in flagged)}, or re-record on a flat floor",
+                                        HARMLESS))  # advice on the doubt the flagged stance already carries
         t_contact = time.perf_counter() - t_contact
         t_gls = time.perf_counter()
         gls, gls_report = None, None
@@ -166,18 +169,18 @@ class InterFootCalibrator(Calibrator):
             gls_report = {"steps": gls.steps, "converged": gls.converged, "chi2_per_dof": gls.chi2_per_dof,
                           "used": gls.holds}
             if not gls.holds:
-                warnings.append(
+                warnings.append(Finding(
                     f"generalized least squares: not used: the declared sensor noise explains the residual poorly "
                     f"(whitened chi2/dof {gls.chi2_per_dof:.2f} > {GLS_MAX_CHI2_PER_DOF}; soles rocking on a real "
                     "floor, or an effect the model lacks: `legcal-bench diagnose` traces it); the row-weighted fit "
-                    "is kept, its posterior from the row weights")
+                    "is kept, its posterior from the row weights", DOUBTS))
                 gls = None
             else:
                 dq = gls.fit.x
                 if not gls.converged:
-                    warnings.append(f"generalized least squares: not converged in {gls.steps} Gauss-Newton steps; "
-                                    "the offsets are the last step's (the data may be far from the model: see "
-                                    "diagnose)")
+                    warnings.append(Finding(f"generalized least squares: not converged in {gls.steps} Gauss-Newton "
+                                            "steps; the offsets are the last step's (the data may be far from the "
+                                            "model: see diagnose)", DOUBTS))
         t_gls = time.perf_counter() - t_gls
 
         t2 = time.perf_counter()

@@ -93,6 +93,7 @@ ROW_FIELDS = (
     ("injected.conditioning.eigenvalues_H_data", "value"),
     ("injected.timing_s.solve", "solve"),
     ("paired_delta_rms_deg", "value"),
+    ("injected.verdict", "value"),
 )
 
 
@@ -236,6 +237,21 @@ def _fmt(vals: list[float], nd: int) -> str:
         return f"{np.nanmean(v):.3g}"
     m, s = np.nanmean(v), np.nanstd(v)
     return f"{m:.{nd}f} ± {s:.{nd}f}" if len(v) > 1 else f"{m:.{nd}f}"
+
+
+def _verdicts(g: dict) -> list[str]:
+    """Per variant whose injected sets did not all get `apply`: its verdicts in words (a
+    do-not-apply cell is a failed calibration, scored as no correction)."""
+    L = []
+    for name in sorted(g):
+        v = [c.get("injected", {}).get("verdict") for c in g[name]]
+        if all(x in (None, "apply") for x in v):
+            continue
+        rej = [c["cell"]["seed"] for c, x in zip(g[name], v) if x == "do-not-apply"]
+        L.append(f"\n{name}: verdicts {v.count('apply')} apply, {v.count('review')} review (scored as corrections), "
+                 f"{len(rej)} do-not-apply" + (f" (seeds {', '.join(map(str, rej))}: failed calibrations, scored as "
+                                               "no correction)" if rej else ""))
+    return L
 
 
 def _matched_comparison(groups: dict) -> list[str]:
@@ -510,6 +526,7 @@ def generate(root: str | Path = "leaderboard") -> str:
         for name in sorted(g):
             L.append(f"| {name} | {_beats_baseline(g[name], g.get(BASELINE, []))} | "
                      + " | ".join(_fmt([get(c) for c in g[name]], nd) for _, get, nd in METRICS.values()) + " |")
+        L += _verdicts(g)
         for name, cells in sorted(failed.get((suite, robot, mode), {}).items()):
             seeds_failed = ", ".join(str(c["cell"]["seed"]) for c in cells)
             L.append(f"\n{name} could not calibrate seed(s) {seeds_failed}: {cells[0]['error']}")

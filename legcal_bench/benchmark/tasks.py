@@ -5,7 +5,7 @@ workers run them alike; both are idempotent and write atomically."""
 from __future__ import annotations
 
 import json
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -15,6 +15,7 @@ from legcal_bench.calibrators.base import calibrate_training
 from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.errors import LegcalError
+from legcal_bench.estimation.verdict import DO_NOT_APPLY
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.evaluation.scoring import score
 from legcal_bench.files.atomic import atomic_write_json
@@ -86,13 +87,18 @@ def _calibrate_and_score(cell: Cell, legmap, data_dir: str, out: dict) -> None:
         bags = Path(data_dir) / cell.dataset(inj).name
         recs = load_session(bags, robot=legmap)
         res = calibrate_training(get_calibrator(cell.calibrator, **dict(cell.options)), legmap, recs)
-        est[inj] = res.offsets_vector(names)
-        s = score(str(bags), res, legmap)
+        # A do-not-apply verdict is a failed calibration: scored as no correction (its
+        # estimate kept beside), counted as such by the leaderboard.
+        rejected = res.decision == DO_NOT_APPLY
+        applied = replace(res, offsets_rad=dict.fromkeys(names, 0.0)) if rejected else res
+        est[inj] = applied.offsets_vector(names)
+        s = score(str(bags), applied, legmap)
         residuals = s.get("heldout", {}).pop("foot_height_residuals_mm", None)
-        out[inj] = {"score": s, "timing_s": res.timing_s, "warnings": res.warnings,
+        out[inj] = {"score": s, "timing_s": res.timing_s, "warnings": res.warnings, "verdict": res.decision,
+                    **({"rejected_offsets_rad": res.offsets_rad} if rejected else {}),
                     "conditioning": {k: v for k, v in res.conditioning.items()
                                      if k.startswith("kappa") or k.startswith("eigenvalues")},
-                    "offsets_rad": res.offsets_rad}
+                    "offsets_rad": applied.offsets_rad}
         if inj == "native" and residuals:
             # Held-out foot heights as counts on fixed bins (for the pooled histograms).
             out[inj]["heldout_foot_height_hist"] = {

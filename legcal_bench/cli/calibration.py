@@ -61,8 +61,10 @@ def cmd_calibrate(a: argparse.Namespace) -> int:
 def format_result(result, names: list[str]) -> str:
     import numpy as np
 
+    from legcal_bench.estimation.verdict import headline
+
     c = result.conditioning
-    lines = [f"{result.calibrator} on {result.robot}: offsets (deg)"]
+    lines = [headline(result.verdict), f"{result.calibrator} on {result.robot}: offsets (deg)"]
     for n in names:
         lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}")
     if result.pitch_sums_rad:
@@ -84,7 +86,7 @@ def format_result(result, names: list[str]) -> str:
             lines.append(f"  {n:<28} {p['value']:+.4e} ± {p['std']:.1e} {p['unit']}"
                          + ("  (held at zero: not estimable from these data)" if p["held"] else ""))
     lines.append("time (s): " + ", ".join(f"{k} {v:.3f}" for k, v in result.timing_s.items()))
-    lines += [f"WARNING: {w}" for w in result.warnings]
+    lines += [f"WARNING ({r['meaning']}): {r['text']}" for r in result.verdict["reasons"]]
     return "\n".join(lines)
 
 
@@ -294,9 +296,20 @@ def cmd_export(a: argparse.Namespace) -> int:
     from legcal_bench.robots.export import (FK_TOL, check_urdf_fold, fold_into_mjcf, fold_into_urdf,
                                             write_offsets_yaml, write_ros2_params)
 
+    from legcal_bench.estimation.verdict import DO_NOT_APPLY, INVALIDATES
+
     result = CalibrationResult.load(a.result)
     legmap = load_robot(a.robot or result.settings.get("robot_spec", result.robot), a.mjcf)
     result.check_robot(legmap, f"--result {a.result}")
+    if result.decision == DO_NOT_APPLY and not a.force:
+        why = [r["text"] for r in result.verdict["reasons"] if r["meaning"] == INVALIDATES]
+        raise ConfigError(f"--result {a.result}: its verdict is do-not-apply ({len(why)} finding(s) invalidate it; "
+                          f"first: {why[0]}); fix the data or the robot and calibrate again, or give --force to "
+                          "write it all the same")
+    if a.bags:
+        from legcal_bench.data.recording import load_session
+
+        result.check_session(load_session(a.bags, robot=legmap), f"--bags {a.bags}")
     if a.urdf_out:  # refused before anything is written
         if legmap.urdf is None:
             raise ConfigError(f"--urdf-out: robot {legmap.name} is described by an MJCF ({legmap.mjcf}), not a URDF "
@@ -308,6 +321,9 @@ def cmd_export(a: argparse.Namespace) -> int:
     if a.mjcf_out and Path(a.mjcf_out).exists():
         raise ConfigError(f"--mjcf-out {a.mjcf_out} exists: give a new folder (the corrected model is written whole)")
     source = str(Path(a.result).resolve())
+    if result.decision != "apply":
+        print(f"legcal-bench export: {'--force: ' if result.decision == DO_NOT_APPLY else ''}writing a result whose "
+              f"verdict is {result.decision}: {result.verdict['reasons'][0]['text']}")
     path = write_offsets_yaml(a.out, legmap, result.offsets_rad, source=source)
     print(f"wrote {path}: {len(legmap.joint_names)} offsets of {legmap.name} in its joint names (q = q_enc + offset)")
     if a.ros2_params:
@@ -582,6 +598,12 @@ def add_commands(sub) -> None:
                          "robot, units, convention (default: none written; replaced if it exists)")
     ex.add_argument("--ros2-node", default="joint_offsets", metavar="NODE",
                     help="node name the ROS 2 parameter file addresses, e.g. /ns/node or /** (default joint_offsets)")
+    ex.add_argument("--force", action="store_true",
+                    help="write a result whose verdict is do-not-apply (default: refused, naming the finding that "
+                         "invalidates it)")
+    ex.add_argument("--bags", default=None, metavar="SESSION",
+                    help="the session set the result was calibrated on: refused unless its training recordings are "
+                         "the ones the result records (default: not checked)")
     ex.add_argument("--urdf-out", default=None, metavar="PATH",
                     help="new file for a copy of the robot's URDF with each leg joint's origin folding its offset in "
                          "and its limits moved, checked with Pinocchio before it is written; only for a robot whose "

@@ -473,6 +473,23 @@ def training(recordings: list["Recording"]) -> list["Recording"]:
     return [r for r in recordings if r.kind in TRAINING_KINDS]
 
 
+def session_identity(recordings: list[Recording]) -> dict:
+    """What a result records of the session set it was calibrated on: the training
+    recordings' names, their sessions' labels (`meta.session`: a log's file stem, not
+    unique) and a SHA-256 over their content (names, kinds, stances, joint names and
+    every sample), which two different sets share only by being the same data."""
+    import hashlib
+
+    recs = sorted(training(recordings), key=lambda r: r.name)
+    h = hashlib.sha256()
+    for r in recs:
+        h.update(json.dumps([r.name, r.kind, r.stance, r.robot, r.joint_names]).encode())
+        for a in (r.time, r.q_enc, r.imu_acc, r.imu_gyro):
+            h.update(np.ascontiguousarray(a, dtype="<f8").tobytes())
+    return {"sessions": sorted({r.session for r in recs if r.session}), "recordings": [r.name for r in recs],
+            "sha256": h.hexdigest()}
+
+
 def load_session(directory: str | Path, joint_names: list[str] | None = None,
                  allow_partial: bool = False, robot: LegMap | None = None) -> list[Recording]:
     """The session set's recordings. With `robot` (the leg map they are calibrated

@@ -163,7 +163,7 @@ def static_estimate(cfg: ClosedLoopConfig, seed: int) -> dict:
     legmap = _robot(cfg)[0]
     dq = trial_offsets(cfg.offsets, legmap, seed)
     t0 = time.perf_counter()
-    failed, result, others = None, None, {}  # failed: a static session set the robot could not hold
+    failed, result, others, verdicts = None, None, {}, {}  # failed: a static session set the robot could not hold
     try:
         with scratch_dir("closedloop") as tmp:
             collect(CollectConfig(robot=cfg.robot, mjcf=cfg.mjcf, mode=cfg.static_mode, offsets=tuple(dq.tolist()),
@@ -171,12 +171,25 @@ def static_estimate(cfg: ClosedLoopConfig, seed: int) -> dict:
                     tmp, progress=False)
             recs = load_session(tmp, robot=legmap)
             result = calibrate_training(get_calibrator(cfg.calibrator, **cfg.options), legmap, recs)
-            others = {label: calibrate_training(get_calibrator(name, **dict(opts)), legmap, recs).offsets_vector(
-                legmap.joint_names) for label, name, opts in cfg.variants}
+            for label, name, opts in cfg.variants:
+                r = calibrate_training(get_calibrator(name, **dict(opts)), legmap, recs)
+                others[label], verdicts[label] = applied(r, legmap), r.decision
     except HoldError as e:
         failed = str(e)
-    return {"dq": dq, "dq_hat": None if failed else result.offsets_vector(legmap.joint_names), "others": others,
+    return {"dq": dq, "dq_hat": None if failed else applied(result, legmap), "others": others,
+            "estimate": None if failed else result.offsets_vector(legmap.joint_names),
+            "verdict": None if failed else result.decision, "variant_verdicts": verdicts,
+            "verdict_reason": None if failed or not result.verdict["reasons"] else result.verdict["reasons"][0]["text"],
             "failed": failed, "warnings": [] if failed else result.warnings, "static_s": time.perf_counter() - t0}
+
+
+def applied(result, legmap) -> np.ndarray:
+    """The correction a trial applies: the estimate, or none (zeros) when its verdict is
+    do-not-apply (a failed calibration, scored as no correction)."""
+    from legcal_bench.estimation.verdict import DO_NOT_APPLY
+
+    dq_hat = result.offsets_vector(legmap.joint_names)
+    return np.zeros_like(dq_hat) if result.decision == DO_NOT_APPLY else dq_hat
 
 
 def trial_walk(cfg: ClosedLoopConfig, seed: int, condition: str, estimate: np.ndarray | None = None):
@@ -204,7 +217,11 @@ def assemble_trial(cfg: ClosedLoopConfig, seed: int, static: dict, walks: dict, 
     """The trial's row from its parts: `walks` condition -> Walk (and ("variant", label)
     -> the variant's corrected walk)."""
     failed, dq, dq_hat = static["failed"], static["dq"], static["dq_hat"]
-    out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": None if failed else dq_hat.tolist(),
+    estimate = static.get("estimate", dq_hat)
+    # recovery_rms_deg: of the correction applied (none for a do-not-apply verdict); the
+    # method's own estimate stays in estimate_rad.
+    out = {"seed": seed, "offsets_rad": dq.tolist(), "estimate_rad": None if failed else estimate.tolist(),
+           "calibration_verdict": static.get("verdict"), "calibration_verdict_reason": static.get("verdict_reason"),
            "recovery_rms_deg": None if failed else float(np.degrees(rms(dq_hat - dq))), "static_s": static["static_s"],
            "static_failed": failed, "calibration_warnings": static["warnings"], "privileged": walks["nominal"].privileged}
     nominal = walks["nominal"]
@@ -226,7 +243,8 @@ def assemble_trial(cfg: ClosedLoopConfig, seed: int, static: dict, walks: dict, 
             out["variants"][label] = {"skipped": failed}
             continue
         est, w = static["others"][label], walks[("variant", label)]
-        row = {"upright": w.upright, "fallen_at": w.fallen_at, "recovery_rms_deg": float(np.degrees(rms(est - dq)))}
+        row = {"upright": w.upright, "fallen_at": w.fallen_at, "recovery_rms_deg": float(np.degrees(rms(est - dq))),
+               "calibration_verdict": static.get("variant_verdicts", {}).get(label)}
         if w.upright and nominal.upright:
             row.update(deviation(w, nominal))
         out["variants"][label] = row
@@ -295,12 +313,19 @@ def summarize(cfg: ClosedLoopConfig, trials: list[dict]) -> dict:
     odometry["distance_m"] = mean_std([o["pitch"]["distance_m"] for o in odo])
     odometry["contact_point"] = odo[0]["contact_point"] if odo else None
     failed = [t for t in trials if t.get("static_failed")]
+    rejected = [t for t in trials if t.get("calibration_verdict") == "do-not-apply"]
     return {"config": asdict(cfg), "conditions": conds, "ratios": ratios, "nominal_spread": spread,
             "oracle_distance": oracle, "calibrated": sum(t["estimate_rad"] is not None for t in trials),
             "odometry": odometry, "variants": variants,
             "recovery_rms_deg": mean_std([t["recovery_rms_deg"] for t in trials if t["recovery_rms_deg"] is not None]),
             "static_failed": {"count": len(failed), "seeds": [t["seed"] for t in failed],
                               "first_reason": failed[0]["static_failed"] if failed else None},
+            # Trials whose calibration's verdict was do-not-apply: failed calibrations, walked and
+            # scored as no correction; review trials are corrections, counted.
+            "verdicts": {v: sum(t.get("calibration_verdict") == v for t in trials)
+                         for v in ("apply", "review", "do-not-apply")},
+            "rejected": {"count": len(rejected), "seeds": [t["seed"] for t in rejected],
+                         "first_reason": rejected[0]["calibration_verdict_reason"] if rejected else None},
             "static_s": mean_std([t["static_s"] for t in trials]),
             "walk_s": mean_std([t[c]["wall_s"] for t in trials for c in CONDITIONS if "wall_s" in t[c]]),
             "privileged": trials[0]["privileged"] if trials else []}

@@ -107,6 +107,7 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
     paths = list_segments(bags, allow_partial)
     recordings = [load_recording(p, names) for p in paths]
     check_against_robot(recordings, legmap)
+    result.check_session(recordings, f"--bags {bags}")
     truths = _truths(paths, names)
     out: dict = {"calibrator": result.calibrator, "robot": legmap.name, "settings": result.settings}
     if not truths:

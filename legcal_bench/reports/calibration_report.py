@@ -28,6 +28,7 @@ import numpy as np
 from legcal_bench.calibrators.base import CalibrationResult
 from legcal_bench.data.recording import MANIFEST, Recording, load_session
 from legcal_bench.errors import ConfigError
+from legcal_bench.estimation.verdict import headline
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.files.atomic import atomic_write_text, replace_dir
 from legcal_bench.files.plots import pyplot, save_figure
@@ -418,7 +419,10 @@ def _summary(result: CalibrationResult, legmap: LegMap, session_dir: Path, manif
               else f"a simulated session (`legcal-bench collect`, mode {manifest.get('mode', '?')})"
               if manifest.get("config") else "recordings")
     setting = result.diagnostics.get("setting") or result.settings.get("setting")
-    lines = [f"- robot: **{legmap.name}** (hip order {' → '.join(r.replace('hip_', '') for r in legmap.hip_order)})",
+    lines = [f"**{headline(result.verdict).replace('verdict: ', 'Verdict: ', 1)}**: apply the offsets only on "
+             "`apply`; on `review` look at the warnings that doubt them, on `do-not-apply` fix what the warnings "
+             "that invalidate them name and calibrate again (each warning's meaning: Warnings and their fixes).", "",
+             f"- robot: **{legmap.name}** (hip order {' → '.join(r.replace('hip_', '') for r in legmap.hip_order)})",
              f"- calibrator: **{result.calibrator}**" + (f", setting {setting}" if setting else "")
              + (f", {result.diagnostics['frames_used']} frames used" if "frames_used" in result.diagnostics else ""),
              f"- session: `{session_dir.resolve()}` ({source})",
@@ -579,8 +583,10 @@ def _posterior(result: CalibrationResult, und: dict, has_std: bool, has_weak: bo
 
 def _warnings(result: CalibrationResult, imp: dict | None) -> list[str]:
     groups = [("From the import", (imp or {}).get("warnings", []) if imp else None),
-              ("From the calibration", result.warnings)]
-    lines = ["Each warning as its source wrote it, with what to do about it.", ""]
+              ("From the calibration", [f"*{r['meaning']}*: {r['text']}" for r in result.verdict["reasons"]])]
+    lines = ["Each warning as its source wrote it, with what to do about it; a calibration warning is marked by "
+             "what it means for the offsets (harmless; limits: the combinations it names are known less well; "
+             "doubts: look before applying; invalidates: do not apply).", ""]
     for title, ws in groups:
         if ws is None:
             continue
@@ -634,6 +640,7 @@ def write_calibration_report(session_dir: str | Path, result_path: str | Path, o
         raise ConfigError(f"--robot {spec}: the result was calibrated for {result.robot!r}, not {legmap.name!r}; "
                           "give the robot it was calibrated for")
     recordings = load_session(session_dir, robot=legmap, allow_partial=True)
+    result.check_session(recordings, f"--bags {session_dir}")
     manifest_path = session_dir / MANIFEST
     manifest = json.loads(manifest_path.read_text()) if manifest_path.is_file() else {}
     imp = manifest.get("import") if isinstance(manifest.get("import"), dict) else None
@@ -674,6 +681,7 @@ def write_calibration_report(session_dir: str | Path, result_path: str | Path, o
                 "posterior_std_deg": {n: _deg(v) for n, v in
                                       ((result.diagnostics.get("posterior") or {}).get("std_rad") or {}).items()},
                 "spreads": [asdict(r) for r in rows], "undetermined": und,
+                "verdict": result.verdict,
                 "warnings": {"import": (imp or {}).get("warnings", []), "calibration": result.warnings},
                 "commands": [{"what": w, "command": c} for w, c in cmds], "code": code_version()}
         write_report(folder, text, json.loads(json.dumps(data, default=float)))

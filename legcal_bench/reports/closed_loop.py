@@ -56,6 +56,20 @@ def static_failures(summary: dict) -> list[str]:
             f"{f['first_reason'].split('. Fix:')[0]}.", ""]
 
 
+def verdicts(summary: dict) -> list[str]:
+    """The trials' calibration verdicts in words: a do-not-apply trial is a failed
+    calibration, walked as no correction; review trials are corrections, counted."""
+    v, rej = summary.get("verdicts"), summary.get("rejected") or {}
+    if not v or not any(v.values()):
+        return []
+    line = (f"Calibration verdicts: {v['apply']} apply, {v['review']} review (corrections, walked as such), "
+            f"{v['do-not-apply']} do-not-apply")
+    if rej.get("count"):
+        line += (f" (seeds {rej['seeds']}: failed calibrations, walked and scored as no correction; the first "
+                 f"reason: {rej['first_reason']})")
+    return [line + ".", ""]
+
+
 def _mm(x: dict | None, nd: int = 1) -> str:
     return "–" if not x else f"{x['mean']:.{nd}f} mm"
 

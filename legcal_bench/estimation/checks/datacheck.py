@@ -64,6 +64,7 @@ import numpy as np
 
 from legcal_bench.data.recording import Recording
 from legcal_bench.estimation.imu.levelling import up_in_base
+from legcal_bench.estimation.verdict import DOUBTS, INVALIDATES, Finding
 from legcal_bench.geometry.lie import Log, frechet_mean, inverse
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
@@ -214,9 +215,11 @@ def frozen_channels(r: Recording, joint_names: list[str],
         what = ", ".join(labels)
         cause = ("a frozen or disconnected encoder, or a logger repeating its last value" if labels[0].startswith(
             "encoder") else "a stalled IMU or a logger repeating its last sample")
-        out.append(f"{r.name}: {what} read{'s' if len(labels) == 1 else ''} one unchanging value from t = {t0} to "
-                   f"{t1} s while the other channels move: likely {cause}; drop those frames or the channel's "
-                   "recording")
+        # A frozen encoder reads no joint: the offsets fitted to it are not the robot's; a
+        # frozen IMU loses the flat-ground term's frames.
+        out.append(Finding(f"{r.name}: {what} read{'s' if len(labels) == 1 else ''} one unchanging value from t = "
+                           f"{t0} to {t1} s while the other channels move: likely {cause}; drop those frames or the "
+                           "channel's recording", INVALIDATES if labels[0].startswith("encoder") else DOUBTS))
     return out, kinds
 
 
@@ -230,10 +233,11 @@ def straight_knees(kin: LegKinematics, r: Recording, limits: CheckLimits = LIMIT
             continue
         q = np.nanmedian(r.q_enc[:, j])
         if abs(q - legmap.knee_straight_rad) > limits.straight_knee_rad:
-            out.append(f"{r.name}: {name} reads {np.degrees(q - legmap.knee_straight_rad):+.1f} deg from straight "
-                       f"(knee_straight_rad {legmap.knee_straight_rad:g}) in the straight-leg standing phase: not "
-                       "a straight-leg phase, angles not in radians, or a wrong knee_straight_rad in the leg map; "
-                       "the knee prior taken from it would be wrong")
+            out.append(Finding(
+                f"{r.name}: {name} reads {np.degrees(q - legmap.knee_straight_rad):+.1f} deg from straight "
+                f"(knee_straight_rad {legmap.knee_straight_rad:g}) in the straight-leg standing phase: not a "
+                "straight-leg phase, angles not in radians, or a wrong knee_straight_rad in the leg map; the knee "
+                "prior taken from it would be wrong", DOUBTS))
     return out
 
 
@@ -262,10 +266,11 @@ def soles_coplanar(kin: LegKinematics, recordings: list[Recording], dq: np.ndarr
         if max(abs(z) / limits.coplanar_m, tilt / limits.coplanar_rad) > 1.0:
             apart.add(r.name)
             where = "above" if z > 0 else "below"
-            out.append(f"{r.name}: the soles are not on one plane: the right sole sits {abs(z) * 1e3:.0f} mm "
-                       f"{where} the left and is tilted {np.degrees(tilt):.1f} deg against it (a good recording: "
-                       f"within a few mm and degrees): angles not in radians, columns in another order than "
-                       "joint_names, the wrong leg map, or not double support")
+            out.append(Finding(
+                f"{r.name}: the soles are not on one plane: the right sole sits {abs(z) * 1e3:.0f} mm {where} the "
+                f"left and is tilted {np.degrees(tilt):.1f} deg against it (a good recording: within a few mm and "
+                "degrees): angles not in radians, columns in another order than joint_names, the wrong leg map, or "
+                "not double support", INVALIDATES))
     return out, apart
 
 
@@ -336,10 +341,10 @@ def swapped_columns(kin: LegKinematics, stances: list[Recording], dq: np.ndarray
     if best[1] * limits.swap_gain < raw:
         msg += (f": likely {best[0]} (the raw transform is steady to {best[1] * 1e3:.1f} mm with that undone); "
                 "check joint_names against the logger's column order")
-        return [msg], set(Qs)
+        return [Finding(msg, INVALIDATES)], set(Qs)
     else:
         msg += ": a foot moved, or the columns, units or leg map do not match the robot"
-    return [msg], set(unsteady)
+    return [Finding(msg, DOUBTS)], set(unsteady)
 
 
 def _standing_terms(kin: LegKinematics, Q: np.ndarray, up: np.ndarray | None, ref: np.ndarray | None,
@@ -450,7 +455,9 @@ def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[
         what = _standing_text(kin, q * flips[0] + estimates[k], up, reference(k) if up is not None else None, limits,
                               straight)
         knees = f", the knees within {np.degrees(limits.standing_knee_rad):g} deg of straight" if straight else ""
-        out.append(f"{r.name}: the {'straight-leg standing' if straight else 'held-out'} posture does not fit the "
+        # A channel read reversed in training corrupts the fit (the knee prior); in a held-out
+        # session, only its score.
+        out.append(Finding(f"{r.name}: the {'straight-leg standing' if straight else 'held-out'} posture does not fit the "
                    f"stances' calibration ({what}; good data: the soles within {limits.standing_height_m * 1e3:g} mm "
                    f"and {np.degrees(limits.standing_tilt_rad):g} deg of one plane, the IMU's vertical within "
                    f"{np.degrees(limits.standing_gravity_rad):g} deg{knees}): likely {names[j - 1]} reads with the "
@@ -460,7 +467,8 @@ def standing_signs(kin: LegKinematics, standing: list[Recording], stances: list[
                    + f" (with it undone the largest figure is {best:.2f} of its limit, as logged {logged:.1f} times "
                    "it); check the logger's sign for that channel in this recording: "
                    + ("a knee prior taken from it would be wrong" if straight else
-                      "its held-out foot height would score the reversed sign, not the calibration"))
+                      "its held-out foot height would score the reversed sign, not the calibration"),
+                   INVALIDATES if straight else DOUBTS))
     return out, named
 
 
@@ -509,9 +517,9 @@ def lunge_sides(kin: LegKinematics, stances: list[Recording],
         return [], set()
     shown = "; ".join(f"{name} ({label}): the right foot {abs(x) * 1e3:.0f} mm {'ahead of' if x > 0 else 'behind'} "
                       "the left" for name, label, x in wrong)
-    return [f"{shown}: the lunge's other foot is ahead: likely the left and right legs' columns are exchanged "
-            "(check joint_names against the logger's column order), or the recording is not of the stance its "
-            "label names"], {r.name for r in stances}
+    return [Finding(f"{shown}: the lunge's other foot is ahead: likely the left and right legs' columns are "
+                    "exchanged (check joint_names against the logger's column order), or the recording is not of the "
+                    "stance its label names", INVALIDATES)], {r.name for r in stances}
 
 
 def _gravity_errors(kin: LegKinematics, Q: np.ndarray, acc: np.ndarray) -> tuple[float, float]:
@@ -584,7 +592,7 @@ def imu_axes(kin: LegKinematics, stances: list[Recording], dq: np.ndarray,
     else:
         msg += (": a wrong IMU mount rotation in the leg map (imu), a sloped floor, an IMU not rigid on the pelvis, "
                 "or a stance that is not static")
-    return [msg], {stances[k].name for k in bad}
+    return [Finding(msg, INVALIDATES)], {stances[k].name for k in bad}
 
 
 def end_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: CheckLimits = LIMITS) -> dict | None:
@@ -633,8 +641,9 @@ def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: Che
         alike = len(big) == 2 and (np.linalg.norm(c["left"] - c["right"])
                                    < 0.5 * max(map(np.linalg.norm, big.values())))
         if alike:
-            out.append(f"{r.name}: the IMU's vertical moved {np.degrees(np.linalg.norm(c['left'])):.2f} deg "
-                       f"against both soles alike {span}: likely an IMU drifting, stuck or not rigid on the pelvis")
+            out.append(Finding(f"{r.name}: the IMU's vertical moved {np.degrees(np.linalg.norm(c['left'])):.2f} deg "
+                               f"against both soles alike {span}: likely an IMU drifting, stuck or not rigid on the "
+                               "pelvis", INVALIDATES))
         else:
             for side, v in big.items():
                 if abs(v[0]) >= abs(v[1]):
@@ -642,22 +651,23 @@ def stance_changes(kin: LegKinematics, r: Recording, dq: np.ndarray, limits: Che
                 else:
                     outer = (v[1] > 0) == (side == "left")
                     what, axis = ("outer" if outer else "inner") + " edge", "roll"
-                out.append(f"{r.name}: the {side} sole's tilt against the IMU's vertical changed "
-                           f"{np.degrees(np.linalg.norm(v)):.2f} deg ({axis}) {span}: likely its {what} lifted and "
-                           "stayed lifted; drop the stance or the frames after the lift")
+                out.append(Finding(f"{r.name}: the {side} sole's tilt against the IMU's vertical changed "
+                                   f"{np.degrees(np.linalg.norm(v)):.2f} deg ({axis}) {span}: likely its {what} "
+                                   "lifted and stayed lifted; drop the stance or the frames after the lift", DOUBTS))
                 lifted = True
     yaw = float(c["yaw"][0])
     creep = abs(yaw) > limits.yaw_rad
     if creep and not lifted:
-        out.append(f"{r.name}: the inter-foot yaw changed {np.degrees(yaw):+.2f} deg {span}: likely a foot "
-                   "creeping in yaw (turning on the floor); check the floor's friction, or drop the stance")
+        out.append(Finding(f"{r.name}: the inter-foot yaw changed {np.degrees(yaw):+.2f} deg {span}: likely a foot "
+                           "creeping in yaw (turning on the floor); check the floor's friction, or drop the stance",
+                           DOUBTS))
     trans = float(np.linalg.norm(c["trans"]))
     carried = abs(yaw) * c["distance"] if creep else 0.0
     if not lifted and trans - carried > limits.slide_m:
         axis = AXES[int(np.argmax(abs(c["trans"])))]
-        out.append(f"{r.name}: the feet moved {trans * 1e3:.1f} mm relative to each other {span} (mostly along "
-                   f"the left sole's {axis}): likely a foot sliding gradually; check the floor's friction, or drop "
-                   "the stance")
+        out.append(Finding(f"{r.name}: the feet moved {trans * 1e3:.1f} mm relative to each other {span} (mostly "
+                           f"along the left sole's {axis}): likely a foot sliding gradually; check the floor's "
+                           "friction, or drop the stance", DOUBTS))
     return out
 
 

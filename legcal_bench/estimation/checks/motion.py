@@ -63,6 +63,7 @@ from legcal_bench.data.recording import MOTIONS, Recording
 from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S, imu_acceleration
 from legcal_bench.estimation.imu.imu_motion import POLYORDER as IMU_POLYORDER
 from legcal_bench.estimation.problem.smoothing import savgol_resampled
+from legcal_bench.estimation.verdict import HARMLESS, Finding
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 STATIC, CONTINUOUS = "static", "continuous"
@@ -293,16 +294,17 @@ def resolve_motion(kin: LegKinematics, recordings: list[Recording], evidence: di
         if ev.motion is None:
             used = declared or CONTINUOUS
             if declared is None and ev.accel is not None and _signal(ev.accel) >= QUIET:
-                warnings.append(
+                warnings.append(Finding(
                     f"{r.name}: motion not declared and the data cannot tell static from continuous "
                     f"({ev.describe()}); taken as continuous (the predicted IMU acceleration is removed): declare "
-                    "\"motion\" if you know how it was logged")
+                    "\"motion\" if you know how it was logged", HARMLESS))
         else:
             used = ev.motion
             if declared is not None and declared != ev.motion:
-                warnings.append(
+                warnings.append(Finding(
                     f"{r.name}: motion declared {declared!r}, the data show {ev.motion!r}: {ev.describe()}; "
-                    f"used as {ev.motion!r}: fix the declaration (or leave \"motion\" out: it is measured)")
+                    f"used as {ev.motion!r}: fix the declaration (or leave \"motion\" out: it is measured)",
+                    HARMLESS))
         if evidence is not None:
             d = ev.to_dict()
             d.pop("seconds")  # a result's diagnostics stay reproducible

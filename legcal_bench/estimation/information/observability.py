@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.estimation.verdict import LIMITS, Finding
 from legcal_bench.files.plots import pyplot, save_figure
 from legcal_bench.robots.design import PITCH_ROLES
 
@@ -74,9 +75,9 @@ def observability_warnings(report: dict) -> list[str]:
         combos = "; ".join(report["unobservable_data"])
         where = ("the regulariser and priors alone pick them" if not report["unobservable_reg"]
                  else "nothing determines them")
-        msgs.append(f"the data do not determine {len(report['unobservable_data'])} offset combination(s) "
+        msgs.append(Finding(f"the data do not determine {len(report['unobservable_data'])} offset combination(s) "
                     f"({where}): {combos}. Record more varied postures (several stances with hip roll and "
-                    "yaw excitation) to observe them.")
+                    "yaw excitation) to observe them.", LIMITS))
     return msgs
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from legcal_bench.estimation.information.observability import describe_combination
+from legcal_bench.estimation.verdict import INVALIDATES, LIMITS, Finding
 from legcal_bench.robots.design import PITCH_ROLES
 from legcal_bench.robots.kinematics import pitch_sums
 
@@ -70,16 +71,16 @@ def uncertainty_warnings(post: dict) -> list[str]:
     for u in post["undetermined"]:
         std = np.rad2deg(u["std_rad"])
         size = f"±{std:.2f}°" if np.isfinite(std) else "unbounded"
-        out.append(f"not determined by the data: {u['combination']}: {size} (1 sigma, limit "
-                   f"{np.rad2deg(STD_LIMIT_RAD):g}°); {u['fix']}")
+        out.append(Finding(f"not determined by the data: {u['combination']}: {size} (1 sigma, limit "
+                           f"{np.rad2deg(STD_LIMIT_RAD):g}°); {u['fix']}", LIMITS))
     return out
 
 
 def bound_warnings(dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
     at = [n for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * bound]
-    return ([f"offsets at the bound ±{np.rad2deg(bound):.2f}°: {at}: the data push them further than the bound "
-             "allows (offsets that large, data that do not determine them, or the wrong robot/leg map); the "
-             "values are not estimates"] if at else [])
+    return ([Finding(f"offsets at the bound ±{np.rad2deg(bound):.2f}°: {at}: the data push them further than the "
+                     "bound allows (offsets that large, data that do not determine them, or the wrong robot/leg "
+                     "map); the values are not estimates", INVALIDATES)] if at else [])
 
 
 def imu_tilt_warnings(response: np.ndarray, tilt_bound: float, signs: np.ndarray) -> list[str]:
@@ -94,9 +95,9 @@ def imu_tilt_warnings(response: np.ndarray, tilt_bound: float, signs: np.ndarray
     out = []
     for axis, size in moved.items():
         if size > STD_LIMIT_RAD:
-            out.append(f"IMU tilt not separable: the IMU's {axis} tilt, declared within ±{tilt_bound * 1e3:.2f} "
-                       f"mrad (mount plus bias over g), moves the pitch sums by up to ±{np.rad2deg(size):.2f}° "
-                       f"(limit {np.rad2deg(STD_LIMIT_RAD):g}°): static level-ground data cannot tell a fixed IMU "
-                       "tilt from offsets; calibrate the IMU (its mounting and accelerometer bias) and declare the "
-                       "smaller bound")
+            out.append(Finding(
+                f"IMU tilt not separable: the IMU's {axis} tilt, declared within ±{tilt_bound * 1e3:.2f} mrad (mount "
+                f"plus bias over g), moves the pitch sums by up to ±{np.rad2deg(size):.2f}° (limit "
+                f"{np.rad2deg(STD_LIMIT_RAD):g}°): static level-ground data cannot tell a fixed IMU tilt from offsets; "
+                "calibrate the IMU (its mounting and accelerometer bias) and declare the smaller bound", LIMITS))
     return out

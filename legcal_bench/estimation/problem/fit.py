@@ -18,6 +18,7 @@ from legcal_bench.estimation.modelgap.confounds import confound_lines, confound_
 from legcal_bench.estimation.modelgap.effects import EffectModel, load_effects
 from legcal_bench.estimation.problem.stance import (MATCHED, InterFootWeights, Prepared, Segment, StanceProblem,
                                                     noise_weights)
+from legcal_bench.estimation.verdict import LIMITS, classed
 from legcal_bench.robots.kinematics import LegKinematics
 
 NOISE_TILT = "imu_tilt"  # the effect whose columns carry the IMU's noise
@@ -146,7 +147,7 @@ def fit_effects(prep: Prepared, effects, dq0: np.ndarray):
         "confounds": confounds, "confounds_at_start": fit.confounds,
         "frames_used": int(sum(len(s.frames) for s in fit.segments)),
     }
-    warnings = [f"effects: {line}" for line in confound_lines(confounds)]
+    warnings = classed([f"effects: {line}" for line in confound_lines(confounds)], LIMITS)
     return report, x[:n_q], warnings
 
 

@@ -35,6 +35,7 @@ from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S, compensate
 from legcal_bench.geometry.lie import Exp, Log, frechet_mean, inverse
 from legcal_bench.paper import (GYRO_GUARD_RAD_S, LOCAL_MEAN_WINDOW_S, N_MAX_PER_STANCE,
                                 ROTATION_RESIDUAL_MAX_DEG)
+from legcal_bench.estimation.verdict import HARMLESS, LIMITS, Finding
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 
 
@@ -98,9 +99,9 @@ def filter_warnings(reports: list[FilterReport]) -> list[str]:
     out = []
     for rep in reports:
         if rep.kept == 0:
-            out.append(f"{rep.name}: no usable frames left ({rep.text()}); segment skipped")
+            out.append(Finding(f"{rep.name}: no usable frames left ({rep.text()}); segment skipped", LIMITS))
         elif rep.non_finite + rep.accel + rep.rotation + rep.translation + rep.slip_splits + rep.short_pieces:
-            out.append(f"{rep.name}: contact filter removed frames ({rep.text()})")
+            out.append(Finding(f"{rep.name}: contact filter removed frames ({rep.text()})", HARMLESS))
     return out
 
 

@@ -34,6 +34,7 @@ from legcal_bench.estimation.problem.problem import Block, Problem
 from legcal_bench.estimation.problem.smoothing import smooth_wrenches
 from legcal_bench.estimation.problem.terms import (OFFSETS, FlatGroundTerm, HeldParametersTerm, InterFootTerm,
                                                    KneePriorTerm, SegmentKinematics, TikhonovTerm)
+from legcal_bench.estimation.verdict import LIMITS, Finding
 from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
@@ -197,7 +198,8 @@ def prepare(robot: LegMap, recordings: list[Recording], w: InterFootWeights, set
             q_knee = np.concatenate([r.q_enc[:, knees] for r in standing]).mean(axis=0)
             prior = robot.knee_straight_rad - q_knee + knee_prior_shift_rad
         else:
-            warnings.append("no straight-leg standing recording: knee prior disabled (lambda_knee -> 0)")
+            warnings.append(Finding("no straight-leg standing recording: knee prior disabled (lambda_knee -> 0)",
+                                    LIMITS))
             w = replace(w, lambda_knee=0.0)
     return Prepared(robot, kin, stances, segments, w, setting_name, prior, knees, reports, warnings,
                     options or FitOptions())

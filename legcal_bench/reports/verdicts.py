@@ -1,0 +1,160 @@
+"""`legcal-bench verdicts`: the results' verdicts measured (`legcal_bench.estimation.verdict`).
+
+Clean realistic session sets of each robot on the weld and the contact floor, each
+calibrated by the inter-foot calibrator: there every `do-not-apply` is a false refusal
+and every `review` a doubt the data did not earn. Beside them the torso-IMU case: the
+whole-body G1 (`examples/playground_g1.legmap.yaml`) with its leg map's IMU moved to
+the model's `imu_in_torso` site, above the waist joints the leg map does not declare;
+its offsets are not the robot's, and its verdict must be `do-not-apply`.
+
+Each case is written as it finishes (`<out>/cases/`), so a stopped run resumes; the page
+is `<out>/verdicts.md` and `.json`.
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.files.atomic import atomic_write_json
+from legcal_bench.files.reports import write_report
+
+PLAYGROUND_EXAMPLE = "examples/playground_g1.legmap.yaml"
+ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE, PLAYGROUND_EXAMPLE)
+MODES = ("weld", "contact")
+SEEDS = tuple(range(10))
+TORSO_IMU = "torso_imu"  # the case's robot label
+TORSO_SITE = "imu_in_torso"
+TORSO_SEEDS = (0, 1, 2)
+APPLY_SHARE = 0.95  # the bar: clean sets get `apply` in at least this share, `do-not-apply` in none
+
+
+def torso_imu_legmap(folder: Path) -> Path:
+    """The whole-body G1's leg map with its IMU on the torso's site and no waist joint
+    among its held joints, written into `folder` (its model path made absolute): what a
+    team writes when its IMU sits in the torso and it declares no waist."""
+    import yaml
+
+    from legcal_bench.robots import resolve_robot
+
+    src = Path(resolve_robot(PLAYGROUND_EXAMPLE))
+    doc = yaml.safe_load(src.read_text())
+    doc["name"] = "playground_g1_torso_imu"
+    doc["imu"] = {"site": TORSO_SITE}
+    # Its waist undeclared: the leg map holds no waist joint (the torso then rides on them).
+    doc["held_joints_rad"] = {k: v for k, v in (doc.get("held_joints_rad") or {}).items() if "waist" not in k}
+    doc["mjcf"] = str((src.parent / doc["mjcf"]).resolve())
+    folder.mkdir(parents=True, exist_ok=True)
+    out = folder / "playground_g1_torso_imu.legmap.yaml"
+    out.write_text("# made by legcal-bench verdicts: the whole-body G1 with its IMU in the torso\n"
+                   + yaml.safe_dump(doc, sort_keys=False))
+    return out
+
+
+def run_case(job: tuple[str, str, str, int]) -> dict:
+    """One case: (label, robot spec, mode, seed) collected, calibrated and scored."""
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.evaluation.scoring import score
+    from legcal_bench.files.parallel import single_thread
+    from legcal_bench.files.scratch import scratch_dir
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.robots import load_robot
+
+    single_thread()
+    label, robot, mode, seed = job
+    legmap = load_robot(robot)
+    with scratch_dir("verdicts") as tmp:
+        collect(CollectConfig(robot=robot, mode=mode, sensors="realistic", seed=seed), tmp, progress=False)
+        result = calibrate_training(get_calibrator("interfoot"), legmap, load_session(tmp, robot=legmap))
+        s = score(str(tmp), result, legmap)
+    held = s.get("heldout", {}).get("foot_height_rms_true_mm", {})
+    return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": result.decision,
+            "reasons": result.verdict["reasons"], "recovery_rms_deg": s["recovery"]["rms_error_deg"],
+            "heldout_true_mm": held}
+
+
+def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: int = 2,
+            progress: bool = True) -> dict:
+    from legcal_bench.files.parallel import map_with_progress
+    from legcal_bench.provenance import code_version, describe
+
+    out = Path(out)
+    cases = out / "cases"
+    jobs = [(str(r), str(r), m, s) for r in robots for m in modes for s in seeds]
+    if TORSO_IMU not in [str(r) for r in robots]:
+        legmap = torso_imu_legmap(out)
+        jobs += [(TORSO_IMU, str(legmap), "weld", s) for s in TORSO_SEEDS]
+
+    def path(job) -> Path:
+        label, _, mode, seed = job
+        return cases / f"{Path(label).name.replace('.legmap.yaml', '')}_{mode}_{seed}.json"
+
+    todo = [j for j in jobs if not path(j).is_file()]
+    cases.mkdir(parents=True, exist_ok=True)
+    map_with_progress(_run_and_keep, [(j, str(path(j))) for j in todo], workers=workers, desc="verdicts",
+                      progress=progress)
+    rows = [json.loads(path(j).read_text()) for j in jobs]
+    made_by = (f"legcal-bench verdicts --robots {' '.join(map(str, robots))} --modes {' '.join(modes)} --seeds "
+               f"{' '.join(map(str, seeds))} --out {out}")
+    data = {"made_by": made_by, "code": code_version(), "rows": rows}
+    write_report(out, markdown(rows, made_by, describe(data["code"])), data, name="verdicts")
+    return data
+
+
+def _run_and_keep(arg) -> str:
+    job, path = arg
+    atomic_write_json(path, run_case(job))  # kept as it finishes: a stopped run resumes here
+    return path
+
+
+def markdown(rows: list[dict], made_by: str, code: str) -> str:
+    clean = [r for r in rows if r["label"] != TORSO_IMU]
+    torso = [r for r in rows if r["label"] == TORSO_IMU]
+    L = ["# Verdicts on clean sets and on the torso-IMU case", "",
+         f"Made by `{made_by}` at {code}.", "",
+         "Each case: a realistic-sensor session set (the default protocol and offsets), calibrated by `interfoot` "
+         "(its default, sensor-weighted setting). On a clean set every `do-not-apply` is a false refusal and "
+         f"every `review` a doubt the data did not earn; the bar: `apply` in at least {APPLY_SHARE:.0%} of the "
+         "clean sets of each floor and `do-not-apply` in none.", "",
+         "| robot | floor | sets | apply | review | do-not-apply | recovery RMS (deg, mean) |",
+         "|---|---|---:|---:|---:|---:|---:|"]
+    groups: dict = {}
+    for r in clean:
+        groups.setdefault((r["robot"], r["mode"]), []).append(r)
+    for (robot, mode), g in groups.items():
+        n = Counter(r["verdict"] for r in g)
+        rec = sum(r["recovery_rms_deg"] for r in g) / len(g)
+        L.append(f"| {robot} | {mode} | {len(g)} | {n['apply']} | {n['review']} | {n['do-not-apply']} | {rec:.3f} |")
+    for mode in sorted({r["mode"] for r in clean}):
+        g = [r for r in clean if r["mode"] == mode]
+        n = Counter(r["verdict"] for r in g)
+        ok = n["apply"] >= APPLY_SHARE * len(g) and not n["do-not-apply"]
+        L += ["", f"**{mode}**: {n['apply']} of {len(g)} apply ({n['apply'] / len(g):.1%}), {n['review']} review, "
+                  f"{n['do-not-apply']} do-not-apply: {'meets' if ok else 'misses'} the bar."]
+    reasons = Counter((r["mode"], x["meaning"], _kind(x["text"])) for r in clean for x in r["reasons"]
+                      if x["meaning"] in ("doubts", "invalidates"))
+    if reasons:
+        L += ["", "What put clean sets in doubt or refused them (count of sets, by the warning's opening words):", ""]
+        L += [f"- {mode}, {meaning}: {kind}: {k}" for (mode, meaning, kind), k in reasons.most_common()]
+    if torso:
+        n = Counter(r["verdict"] for r in torso)
+        L += ["", "## The torso-IMU case", "",
+              f"The whole-body G1 with its leg map's IMU on `{TORSO_SITE}` (above the undeclared waist), weld floor, "
+              f"seeds {', '.join(str(r['seed']) for r in torso)}: {n['do-not-apply']} of {len(torso)} do-not-apply "
+              f"({'met' if n['do-not-apply'] == len(torso) else 'missed'}).", "",
+              "| seed | verdict | recovery RMS (deg) | first reason |", "|---:|---|---:|---|"]
+        for r in torso:
+            first = r["reasons"][0]["text"] if r["reasons"] else "–"
+            L.append(f"| {r['seed']} | {r['verdict']} | {r['recovery_rms_deg']:.3f} | {first[:200]} |")
+    return "\n".join(L) + "\n"
+
+
+def _kind(text: str) -> str:
+    """A warning's kind: its words after the recording's name, to the first colon."""
+    head = text.split(": ", 1)
+    body = head[1] if len(head) > 1 and " " not in head[0] else text
+    return body.split(":")[0][:80]
