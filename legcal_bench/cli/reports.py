@@ -45,6 +45,15 @@ def cmd_data_checks(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_verdicts(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seeds=inputs.seed, workers=inputs.count)
+    from legcal_bench.reports.verdicts import measure
+
+    d = measure(a.out, a.robots, a.modes, a.seeds, workers=a.workers, progress=not a.quiet)
+    print(f"wrote {a.out}/verdicts.md, .json ({len(d['rows'])} cases)")
+    return 0
+
+
 def cmd_robots_check(a: argparse.Namespace) -> int:
     from legcal_bench.reports.robots_check import run_robots_check
 
@@ -237,6 +246,27 @@ def add_commands(sub) -> None:
     _out(dc, "data-checks", "reports/robots_check", "data_checks.md and data_checks.json")
     _quiet(dc)
     dc.set_defaults(func=cmd_data_checks)
+
+    from legcal_bench.reports import verdicts as vd
+
+    vp = sub.add_parser("verdicts", help="the results' verdicts measured: clean realistic sets of each robot (weld, "
+                                         "contact) and the torso-IMU case; writes verdicts.md/.json",
+                        description="Collect clean realistic-sensor session sets of each robot on each floor, "
+                                    "calibrate each with interfoot and count the verdicts (on clean sets every "
+                                    "do-not-apply is a false refusal, every review an unearned doubt), and the "
+                                    "whole-body G1 with its IMU in the torso above its undeclared waist (must be "
+                                    "do-not-apply). Each case is kept under --out/cases as it finishes: a stopped "
+                                    "run resumes. Writes verdicts.md and verdicts.json.")
+    vp.add_argument("--robots", nargs="+", default=list(vd.ROBOTS),
+                    help=f"robots, built-in names or leg maps (default {' '.join(vd.ROBOTS)})")
+    vp.add_argument("--modes", nargs="+", default=list(vd.MODES), choices=["kinematic", "weld", "contact"],
+                    help=f"floors (default {' '.join(vd.MODES)})")
+    vp.add_argument("--seeds", nargs="+", type=int, default=list(vd.SEEDS),
+                    help="collect seeds, each an integer in [0, 2^32 - 1] (default 0 1 2 3 4 5 6 7 8 9)")
+    vp.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
+    _out(vp, "verdicts", "reports/verdicts", "verdicts.md, verdicts.json and cases/")
+    _quiet(vp)
+    vp.set_defaults(func=cmd_verdicts)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its
     # report module, which loads the simulation.

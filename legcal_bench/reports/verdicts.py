@@ -8,7 +8,8 @@ the model's `imu_in_torso` site, above the waist joints the leg map does not dec
 its offsets are not the robot's, and its verdict must be `do-not-apply`.
 
 Each case is written as it finishes (`<out>/cases/`), so a stopped run resumes; the page
-is `<out>/verdicts.md` and `.json`.
+is `<out>/verdicts.md` and `.json`. Light at import (the command line's parser reads its
+defaults).
 """
 
 from __future__ import annotations
@@ -18,8 +19,6 @@ from collections import Counter
 from pathlib import Path
 
 from legcal_bench.benchmark.suites import G1_EXAMPLE
-from legcal_bench.files.atomic import atomic_write_json
-from legcal_bench.files.reports import write_report
 
 PLAYGROUND_EXAMPLE = "examples/playground_g1.legmap.yaml"
 ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE, PLAYGROUND_EXAMPLE)
@@ -80,6 +79,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
 def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: int = 2,
             progress: bool = True) -> dict:
     from legcal_bench.files.parallel import map_with_progress
+    from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
 
     out = Path(out)
@@ -106,6 +106,8 @@ def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: i
 
 
 def _run_and_keep(arg) -> str:
+    from legcal_bench.files.atomic import atomic_write_json
+
     job, path = arg
     atomic_write_json(path, run_case(job))  # kept as it finishes: a stopped run resumes here
     return path
