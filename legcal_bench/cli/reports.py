@@ -6,7 +6,9 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from legcal_bench import inputs
 from legcal_bench.cli.parsing import pool_options
+from legcal_bench.cli.robots import door
 
 DEFAULT_FIXTURE = Path("tests/fixtures/regression.json")
 RUNS = "runs"  # where every report command writes unless --out names a committed report
