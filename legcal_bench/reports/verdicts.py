@@ -15,6 +15,7 @@ defaults).
 from __future__ import annotations
 
 import json
+import os
 from collections import Counter
 from pathlib import Path
 
@@ -32,7 +33,7 @@ APPLY_SHARE = 0.95  # the bar: clean sets get `apply` in at least this share, `d
 
 def torso_imu_legmap(folder: Path) -> Path:
     """The whole-body G1's leg map with its IMU on the torso's site and no waist joint
-    among its held joints, written into `folder` (its model path made absolute): what a
+    among its held joints, written into `folder` (its model path relative to it): what a
     team writes when its IMU sits in the torso and it declares no waist."""
     import yaml
 
@@ -44,8 +45,10 @@ def torso_imu_legmap(folder: Path) -> Path:
     doc["imu"] = {"site": TORSO_SITE}
     # Its waist undeclared: the leg map holds no waist joint (the torso then rides on them).
     doc["held_joints_rad"] = {k: v for k, v in (doc.get("held_joints_rad") or {}).items() if "waist" not in k}
-    doc["mjcf"] = str((src.parent / doc["mjcf"]).resolve())
     folder.mkdir(parents=True, exist_ok=True)
+    # The model's path from the new leg map's folder (a checkout's reports/verdicts/ reaches
+    # ../shared the same way on every machine).
+    doc["mjcf"] = os.path.relpath((src.parent / doc["mjcf"]).resolve(), folder.resolve())
     out = folder / "playground_g1_torso_imu.legmap.yaml"
     out.write_text("# made by legcal-bench verdicts: the whole-body G1 with its IMU in the torso\n"
                    + yaml.safe_dump(doc, sort_keys=False))
