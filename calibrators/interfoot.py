@@ -7,8 +7,12 @@ Objective over all contact segments sharing one offset vector dq:
 
 on the framework's stance problem (`legcal_bench.estimation.problem.stance`: one
 inter-foot and one flat-ground term per contact segment, a Tikhonov and a knee-prior
-term), bounded to |dq| <= 0.08 rad from dq = 0. What this method owns: its settings
-(the rows' weights and priors), its solver choice, and the order of the steps;
+term), bounded to |dq| <= 0.08 rad from dq = 0. Offsets the data push against that
+bound (gross ones: a re-mounted joint, a multi-turn encoder that lost a count) are
+solved for within ±30° (`bound_max`; the same minimum as that bound given by hand;
+`gross`: the stage, `StanceProblem.solve_gross`), the bound and the stage in the
+result's diagnostics ("bound") and a warning naming the joints. What this method owns:
+its settings (the rows' weights and priors), its solver choice, and the order of the steps;
 the machinery (generalized least squares, the contact check, the posterior, the model
 gap's effects fit) is the framework's (`legcal_bench.estimation`).
 
@@ -46,9 +50,9 @@ from legcal_bench.estimation.information.uncertainty import (NO_NOISE, bound_war
 from legcal_bench.estimation.modelgap.effects import load_effects
 from legcal_bench.estimation.problem.fit import (GLS_MAX_CHI2_PER_DOF, fit_effects, noise_posterior, offsets_fit,
                                                  refine, tilt_response)
-from legcal_bench.estimation.problem.stance import (JACOBIANS, MATCHED, SENSOR, SOLVERS, FitOptions,
-                                                    InterFootWeights, Prepared, StanceProblem, prepare,
-                                                    sensor_weights)
+from legcal_bench.estimation.problem.stance import (GROSS_BOUND_RAD, GROSS_STAGES, JACOBIANS, MATCHED, SENSOR,
+                                                    SOLVERS, FitOptions, InterFootWeights, Prepared, StanceProblem,
+                                                    bound_diagnostics, gross_warnings, prepare, sensor_weights)
 from legcal_bench.estimation.verdict import DOUBTS, HARMLESS, LIMITS, Finding
 from legcal_bench.robots.kinematics import pitch_sums
 from legcal_bench.robots.legmap import LegMap
@@ -77,7 +81,7 @@ class InterFootCalibrator(Calibrator):
                  trim_fraction: float = paper.TRIM_FRACTION, bound: float = paper.OFFSET_BOUND_RAD,
                  max_outer: int = paper.OUTER_MAX_ITERATIONS, n_max: int = paper.N_MAX_PER_STANCE, tol: float = 1e-10,
                  imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S, effects: str = "",
-                 contact_check: str = "flag"):
+                 contact_check: str = "flag", bound_max: float = GROSS_BOUND_RAD, gross: str = "grow"):
         if setting not in SETTING_NAMES:
             raise CalibrationError(f"setting {setting!r}: use one of {', '.join(SETTING_NAMES)}")
         if solver not in SOLVERS:
@@ -87,6 +91,10 @@ class InterFootCalibrator(Calibrator):
         if contact_check not in CONTACT_CHECKS:
             raise CalibrationError(f"contact_check {contact_check!r}: use flag (default: warn about a stance whose "
                                    "soles were not on one plane), drop (also refit without it) or off")
+        if gross not in GROSS_STAGES:
+            raise CalibrationError(f"gross {gross!r}: use grow (default: offsets at the bound solved for within "
+                                   "bound_max), double (the bound doubled while offsets sit at it), coarse (from a "
+                                   "global stage on a subsample) or off")
         self.setting, self.contact_check = setting, contact_check
         self.overrides = {k: number_option(k, v, 0.0) for k, v in dict(
             lambda_f=lambda_f, lambda_g=lambda_g, lambda_q=lambda_q, lambda_knee=lambda_knee).items() if v is not None}
@@ -95,7 +103,8 @@ class InterFootCalibrator(Calibrator):
             solver=solver, jacobian=jacobian, tol=number_option("tol", tol, 0.0, 1.0, low_open=True),
             bound=number_option("bound", bound, 0.0, np.pi, low_open=True),
             max_outer=number_option("max_outer", max_outer, 1, integer=True),
-            trim_fraction=number_option("trim_fraction", trim_fraction, 0.0, 0.5))
+            trim_fraction=number_option("trim_fraction", trim_fraction, 0.0, 0.5),
+            bound_max=number_option("bound_max", bound_max, 0.0, np.pi, low_open=True), gross=gross)
         self.preprocess = preprocess_options(n_max, imu, imu_window_s)
         self.effect_names = tuple(n for n in (str(effects).replace(",", " ").split()) if n)
         if self.effect_names:
@@ -112,7 +121,8 @@ class InterFootCalibrator(Calibrator):
         o = self.options
         return {"setting": self.setting, "solver": o.solver, "jacobian": o.jacobian, **self.overrides,
                 "knee_prior_shift_rad": self.knee_prior_shift_rad, "trim_fraction": o.trim_fraction,
-                "bound": o.bound, "max_outer": o.max_outer, "preprocess": asdict(self.preprocess),
+                "bound": o.bound, "bound_max": o.bound_max, "gross": o.gross, "max_outer": o.max_outer,
+                "preprocess": asdict(self.preprocess),
                 "effects": list(self.effect_names), "contact_check": self.contact_check}
 
     def weights_for(self, legmap: LegMap, recordings: list[Recording] | None = None) -> tuple[str, InterFootWeights]:
@@ -137,6 +147,9 @@ class InterFootCalibrator(Calibrator):
         # First solve, trim the largest residual frames, solve again.
         t1 = time.perf_counter()
         dq, hist1, hist2 = problem.solve_trimmed(np.zeros(robot.n_joints), self.options)
+        # The bound the solve ended with (bound_max for gross offsets) holds for every later step.
+        opts = replace(self.options, bound=problem.bound)
+        prep = replace(prep, options=opts)
         t_solve = time.perf_counter() - t1
         t_contact = time.perf_counter()
         contacts, dropped = None, []
@@ -152,10 +165,11 @@ class InterFootCalibrator(Calibrator):
             elif flagged and self.contact_check == "drop":
                 dropped = [c.recording for c in flagged]
                 problem.build(kept)
-                dq, hist3 = problem.solve(dq, self.options)
+                dq, hist3 = problem.solve_gross(dq, opts)
                 hist2 += hist3
+                opts = replace(opts, bound=problem.bound)
                 # A fit with effects starts from the same stances.
-                prep = replace(prep, segments=[s for s in prep.segments if s.recording not in dropped])
+                prep = replace(prep, segments=[s for s in prep.segments if s.recording not in dropped], options=opts)
                 warnings.append(Finding(f"contact_check=drop: fitted without {', '.join(dropped)}", LIMITS))
             elif flagged:
                 warnings.append(Finding("contact_check: rerun with --option contact_check=drop to fit without "
@@ -203,7 +217,8 @@ class InterFootCalibrator(Calibrator):
             warnings += uncertainty_warnings(post)
         tilt = tilt_response(prep, problem, dq, gls)
         warnings += imu_tilt_warnings(tilt, stances[0].sensor_model.tilt_bound, signs)
-        warnings += bound_warnings(dq, self.options.bound, robot.joint_names)
+        warnings += bound_warnings(dq, opts.bound, robot.joint_names)
+        warnings += gross_warnings(problem.gross, dq, opts.bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)
         t_obs = time.perf_counter() - t2
         effects_report = None
@@ -226,6 +241,7 @@ class InterFootCalibrator(Calibrator):
                 "cost": float(0.5 * r_final @ r_final),
                 "generalized_least_squares": gls_report,
                 "history_first_solve": hist1, "history_after_trim": hist2,
+                "bound": bound_diagnostics(self.options.bound, opts.bound, problem.gross),
                 "pitch_signs": signs.tolist(),
                 "posterior": post if post is not None else {"note": NO_NOISE},
                 "imu_tilt_response": tilt.tolist(),

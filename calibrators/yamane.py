@@ -21,6 +21,11 @@ variable projection (each frame's roll and pitch solved for the current offsets,
 on the offsets with the projected Jacobian), three times faster here. The information
 on the offsets has the per-frame tilts eliminated (Schur complement).
 
+Bound: |dq| <= 0.08 rad (the paper's); offsets the data push against it (gross ones: a
+re-mounted joint, a multi-turn encoder that lost a count) are solved for within
+`bound_max` (±30°), the same minimum as that bound given by hand, as the inter-foot
+calibrator does (`legcal_bench.estimation.problem.stance.StanceProblem.solve_gross`).
+
 Weights: `weights="default"` uses w_h = 1000 /m and w_imu = 1000 /rad (1 mm of height
 counts like 1 mrad of tilt; the paper gives no values); `weights="sensor"` derives them
 from the recordings' declared sensor model (1/sigma of each residual).
@@ -43,6 +48,8 @@ from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S
 from legcal_bench.estimation.problem.preprocess import filter_warnings, select_frames
 from legcal_bench.estimation.problem.problem import Block, Problem
+from legcal_bench.estimation.problem.stance import (GROSS_BOUND_RAD, at_bound, bound_diagnostics, gross_report,
+                                                    gross_warnings)
 from legcal_bench.estimation.problem.terms import OFFSETS, TILT, ImuTiltTerm, SoleHeightTerm
 from legcal_bench.estimation.information.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                  uncertainty_warnings)
@@ -61,7 +68,8 @@ class YamaneCalibrator(Calibrator):
 
     def __init__(self, weights: str = "default", w_h: float | None = None, w_imu: float | None = None,
                  n_max: int = paper.N_MAX_PER_STANCE, bound: float = paper.OFFSET_BOUND_RAD, tol: float = 1e-10,
-                 solver: str = "projected", imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S):
+                 solver: str = "projected", imu: str = "compensated", imu_window_s: float = IMU_WINDOW_S,
+                 bound_max: float = GROSS_BOUND_RAD):
         if weights not in ("default", "sensor"):
             raise CalibrationError(f"weights {weights!r}: use default or sensor")
         if solver not in SOLVERS:
@@ -72,6 +80,7 @@ class YamaneCalibrator(Calibrator):
         self.w_h_opt = None if w_h is None else number_option("w_h", w_h, 0.0)
         self.w_imu_opt = None if w_imu is None else number_option("w_imu", w_imu, 0.0)
         self.bound = number_option("bound", bound, 0.0, np.pi, low_open=True)
+        self.bound_max = number_option("bound_max", bound_max, 0.0, np.pi, low_open=True)
         self.tol = number_option("tol", tol, 0.0, 1.0, low_open=True)
         self.preprocess = preprocess_options(n_max, imu, imu_window_s)
 
@@ -81,8 +90,8 @@ class YamaneCalibrator(Calibrator):
 
     def settings(self) -> dict:
         return {"weights": self.weights, "w_h": self.w_h_opt, "w_imu": self.w_imu_opt, "bound": self.bound,
-                "n_max": self.preprocess.n_max, "solver": self.solver, "imu": self.preprocess.imu,
-                "imu_window_s": self.preprocess.imu_window_s}
+                "bound_max": self.bound_max, "n_max": self.preprocess.n_max, "solver": self.solver,
+                "imu": self.preprocess.imu, "imu_window_s": self.preprocess.imu_window_s}
 
     def _weights(self, recordings: list[Recording], kin: LegKinematics) -> tuple[float, float]:
         w_h, w_imu = 1000.0, 1000.0
@@ -118,13 +127,29 @@ class YamaneCalibrator(Calibrator):
         # Start each root orientation at the IMU's tilt: up = R^T e_z.
         roll0 = np.arctan2(up[:, 1], up[:, 2])
         pitch0 = np.arctan2(-up[:, 0], np.hypot(up[:, 1], up[:, 2]))
-        problem = Problem([Block(OFFSETS, robot.n_joints, bound=self.bound), Block(TILT, 2, per_frame=True)],
-                          [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(up, w_imu)])
-        x0 = problem.pack({TILT: np.column_stack([roll0, pitch0])})
+        terms = [SoleHeightTerm(kin, Q, w_h), ImuTiltTerm(up, w_imu)]
+
+        def solve(bound: float):
+            problem = Problem([Block(OFFSETS, robot.n_joints, bound=bound), Block(TILT, 2, per_frame=True)], terms)
+            sol = problem.solve(x0, method=SOLVERS[self.solver], tol=self.tol, max_nfev=100)
+            return problem, sol, problem.unpack(sol.x)[OFFSETS]
+
+        x0 = Problem([Block(OFFSETS, robot.n_joints), Block(TILT, 2, per_frame=True)], terms).pack(
+            {TILT: np.column_stack([roll0, pitch0])})
         t1 = time.perf_counter()
-        sol = problem.solve(x0, method=SOLVERS[self.solver], tol=self.tol, max_nfev=100)
+        # Gross offsets: the solve at bound_max. The projected solver's LM steps are
+        # unbounded (the bound honoured by a re-solve only when they leave it), so it runs
+        # there first: an answer within the paper's bound is that bound's own, bit for bit.
+        grows = self.bound < self.bound_max
+        early = grows and self.solver == "projected"
+        problem, sol, dq = solve(self.bound_max if early else self.bound)
+        gross, bound = None, self.bound
+        if grows and at_bound(dq, self.bound):
+            if not early:
+                problem, sol, dq = solve(self.bound_max)
+            bound = self.bound_max
+            gross = gross_report("grow", self.bound, bound, dq, robot.joint_names, 0 if early else 1)
         t_solve = time.perf_counter() - t1
-        dq = problem.unpack(sol.x)[OFFSETS]
         w = np.linalg.eigvalsh(problem.information(sol.x)[0])
         conditioning = {"kappa_H_data": float(w[-1] / w[0]) if w[0] > 0 else float("inf"),
                         "eigenvalues_H_data": w.tolist()}
@@ -134,7 +159,7 @@ class YamaneCalibrator(Calibrator):
         warnings: list[str] = filter_warnings(reports)
         post = None
         if sig is not None:
-            whitened = Problem([Block(OFFSETS, robot.n_joints, bound=self.bound), Block(TILT, 2, per_frame=True)],
+            whitened = Problem([Block(OFFSETS, robot.n_joints, bound=bound), Block(TILT, 2, per_frame=True)],
                                [SoleHeightTerm(kin, Q, 1.0 / sig["height"]), ImuTiltTerm(up, 1.0 / sig["tilt"])])
             post = posterior(whitened.information(sol.x)[0], robot.joint_names, robot.joint_roles, signs)
             warnings += uncertainty_warnings(post)
@@ -145,7 +170,8 @@ class YamaneCalibrator(Calibrator):
             dr[:, 8:, axis] = -w_imu * np.cross(np.eye(3)[axis], up)
         tilt_response = problem.shared_response(sol.x, dr.reshape(-1, 2))[:robot.n_joints]
         warnings += imu_tilt_warnings(tilt_response, stances[0].sensor_model.tilt_bound, signs)
-        warnings += bound_warnings(dq, self.bound, robot.joint_names)
+        warnings += bound_warnings(dq, bound, robot.joint_names)
+        warnings += gross_warnings(gross, dq, bound, robot.joint_names)
         warnings += data_warnings(kin, recordings, dq)
         return CalibrationResult(
             calibrator=self.name, robot=robot.name,
@@ -155,7 +181,8 @@ class YamaneCalibrator(Calibrator):
             diagnostics={"frames_used": int(n), "w_h": w_h, "w_imu": w_imu, "filter": [asdict(r) for r in reports],
                          "cost": float(sol.cost), "nfev": int(sol.nfev), "status": int(sol.status),
                          "posterior": post if post is not None else {"note": NO_NOISE},
-                         "imu_tilt_response": tilt_response.tolist()},
+                         "imu_tilt_response": tilt_response.tolist(),
+                         "bound": bound_diagnostics(self.bound, bound, gross)},
             timing_s={"preprocess": t1 - t0, "solve": t_solve, "total": time.perf_counter() - t0},
             settings=self.settings(),
             warnings=warnings,

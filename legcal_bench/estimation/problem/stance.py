@@ -10,7 +10,8 @@ framework's model gap, contact check and generalized least squares run on it.
 - `InterFootWeights`: the rows' weights (per residual type, or 1/sigma per row);
   `MATCHED` unit weights, `sensor_weights` the declared noise's;
 - `Segment`, `segments_of`: the frames a fit uses, with their IMU vertical;
-- `FitOptions`: solver, Jacobian, tolerance, bound, trimming;
+- `FitOptions`: solver, Jacobian, tolerance, bound (and the wider one gross offsets are
+  solved for within), trimming;
 - `Prepared`, `prepare`: the training recordings ready to fit;
 - `StanceProblem`: the weighted objective, solved by variable projection (the segment
   means re-estimated inside the residual) or by the paper's alternation.
@@ -28,13 +29,14 @@ from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
 from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.information.uncertainty import BOUND_FRACTION
 from legcal_bench.estimation.modelgap.effects import EffectModel, EffectSegment, SegmentData
 from legcal_bench.estimation.problem.preprocess import PreprocessConfig, filter_warnings, select_frames
 from legcal_bench.estimation.problem.problem import Block, Problem
 from legcal_bench.estimation.problem.smoothing import smooth_wrenches
 from legcal_bench.estimation.problem.terms import (OFFSETS, FlatGroundTerm, HeldParametersTerm, InterFootTerm,
                                                    KneePriorTerm, SegmentKinematics, TikhonovTerm)
-from legcal_bench.estimation.verdict import LIMITS, Finding
+from legcal_bench.estimation.verdict import HARMLESS, LIMITS, Finding
 from legcal_bench.robots.design import HIP_ROLES, LEG_ROLES
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
@@ -42,6 +44,18 @@ from legcal_bench.robots.legmap import LegMap
 SENSOR = "sensor"  # the setting whose rows are whitened by the declared noise (then the GLS)
 SOLVERS = ("projected", "alternating")
 JACOBIANS = ("analytic", "2-point")
+# Gross offsets (a re-mounted joint, a multi-turn encoder that lost a count): offsets the
+# data push against the bound are solved for at GROSS_BOUND_RAD (`StanceProblem.solve_gross`);
+# the result states the first doubling (x GROW_FACTOR) of the bound that holds them.
+GROSS_BOUND_RAD = float(np.deg2rad(30.0))
+GROW_FACTOR = 2.0
+# "grow": the solve at the widest bound from the same start (with the projected solver,
+# run first: its answer inside the first bound is that bound's own); "double": the bound
+# doubled and solved again until no offset sits at it; "coarse": the solve at the widest
+# bound started from a global stage on every COARSE_STRIDE-th frame from zero; "off": the
+# bound stays. "double" and "coarse" were measured against "grow" and are slower.
+GROSS_STAGES = ("grow", "double", "coarse", "off")
+COARSE_STRIDE = 8
 
 
 @dataclass(frozen=True)
@@ -92,13 +106,57 @@ def sensor_weights(legmap: LegMap, recordings: list[Recording], **overrides) -> 
     return SENSOR, replace(noise_weights(sig), **overrides)
 
 
+def gross_report(stage: str, first: float, bound: float, dq: np.ndarray, names: list[str], solves: int) -> dict:
+    """What a gross stage did: the `stage`, the `first` bound and the `bound` the solve
+    ended with, the first doubling (x `GROW_FACTOR`) of the first bound that holds the
+    offsets `dq`, the joints at or beyond the first bound, the extra solves."""
+    holds, top = first, float(np.abs(dq).max())
+    while top >= BOUND_FRACTION * holds and holds < bound:
+        holds = min(GROW_FACTOR * holds, bound)
+    return {"stage": stage, "first_bound_rad": first, "bound_rad": bound, "holds_rad": holds,
+            "beyond_first_bound": [n for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * first],
+            "solves": solves}
+
+
+def bound_diagnostics(first: float, final: float, gross: dict | None) -> dict:
+    """A result's record of its bound: the first, the final, and what the gross stage did
+    (`gross_report`; none: stage None)."""
+    keys = ("stage", "holds_rad", "beyond_first_bound", "solves")
+    return {"first_rad": first, "final_rad": final,
+            **({"stage": None, "holds_rad": first, "beyond_first_bound": [], "solves": 0} if gross is None else
+               {k: gross[k] for k in keys})}
+
+
+def at_bound(dq: np.ndarray, bound: float) -> bool:
+    """Does an offset sit at `bound` (within `BOUND_FRACTION` of it)?"""
+    return bool(np.any(np.abs(dq) >= BOUND_FRACTION * bound))
+
+
+def gross_warnings(gross: dict | None, dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
+    """Information (not an alarm) when the gross stage ran (`StanceProblem.gross`) and the
+    offsets ended inside its `bound`: which joints were at or beyond the first bound, by
+    how much, and the likely cause. Offsets still at `bound` are the bound warning's
+    (`bound_warnings`)."""
+    if gross is None or at_bound(dq[:len(names)], bound):
+        return []
+    first = gross["first_bound_rad"]
+    beyond = ", ".join(f"{n} {np.rad2deg(v):+.2f}°" for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * first)
+    first_name = "the paper's bound" if first == paper.OFFSET_BOUND_RAD else "the bound"
+    return [Finding(f"gross offsets: {beyond} at or beyond {first_name} ±{np.rad2deg(first):.2f}°: solved within "
+                    f"±{np.rad2deg(bound):.2f}° ({gross['stage']} stage; ±{np.rad2deg(gross['holds_rad']):.2f}° "
+                    "would hold them); estimates, not clipped, the same as a solve given that bound by hand. "
+                    "Offsets this large are most likely a re-mounted joint or a multi-turn encoder that lost a "
+                    "count: check those joints' mounting and encoder zero", HARMLESS)]
+
+
 @dataclass(frozen=True)
 class FitOptions:
     """How the problem is solved: `solver` "projected" (variable projection, reaches the
     optimum) or "alternating" (the paper's: means, then a bounded inner solve with them
-    held); the Jacobian analytic or forward differences; |offset| <= `bound`; after the
-    first solve the `trim_fraction` of each segment's frames with the largest residual
-    is dropped and the problem solved again."""
+    held); the Jacobian analytic or forward differences; |offset| <= `bound`, offsets
+    that sit at it solved for within `bound_max` by the `gross` stage
+    (`StanceProblem.solve_gross`); after the first solve the `trim_fraction` of each segment's frames with the largest
+    residual is dropped and the problem solved again."""
 
     solver: str = "projected"
     jacobian: str = "analytic"
@@ -106,6 +164,8 @@ class FitOptions:
     bound: float = paper.OFFSET_BOUND_RAD
     max_outer: int = paper.OUTER_MAX_ITERATIONS
     trim_fraction: float = paper.TRIM_FRACTION
+    bound_max: float = GROSS_BOUND_RAD
+    gross: str = "grow"
 
 
 @dataclass
@@ -225,6 +285,7 @@ class StanceProblem:
                  q_ref: np.ndarray | None = None, held: tuple[int, ...] = ()):
         self.kin, self.w, self.prior, self.knees, self.bound = kin, w, prior, list(knees), bound
         self.model, self.q_ref, self.held = model, q_ref, tuple(held)
+        self.gross: dict | None = None  # what the gross stage did, if it ran (`solve_gross`)
         self.n_offsets = kin.legmap.n_joints
         self.n = self.n_offsets if model is None else model.n
         if w.row_sigmas is None:
@@ -358,12 +419,71 @@ class StanceProblem:
             kept.append(seg.subset(np.sort(np.argsort(score)[: n - int(round(fraction * n))])))
         self.build(kept)
 
+    def set_bound(self, bound: float) -> None:
+        """|offset| <= `bound` from now on (the terms, and their segment means, kept)."""
+        self.bound = bound
+        p = self.problem
+        self.problem = Problem([replace(b, bound=bound) if b.name == OFFSETS else b for b in p.blocks.values()],
+                               p.terms)
+        self.problem._cache, self.problem._patterns = p._cache, p._patterns  # the same rows: still valid
+
+    def solve_gross(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list]:
+        """`solve` at the problem's bound, and if offsets sit at it (gross offsets) the
+        solve at `opts.bound_max` that a hand-given bound would run, the bound kept there
+        for every later step; offsets still at `bound_max` are the bound warning's.
+
+        The gross stage (`opts.gross`): "grow" (default) solves at `bound_max` from `dq0`
+        (the hand-bounded solve itself, the same minimum bit for bit); with the projected
+        solver it is the first solve too: its Levenberg-Marquardt steps are unbounded and
+        the bound is honoured by a bounded re-solve only when they leave it, so an answer
+        inside the first bound is the first bound's own (the same steps, bit for bit),
+        and the bounded re-solve at the first bound, the slow part, is skipped where it
+        would be discarded. "double" (measured, slower): the bound doubled (x
+        `GROW_FACTOR`) and solved again from the bounded answer until no offset sits at
+        it. "coarse" (measured, slower) starts the solve at `bound_max` from a global
+        stage instead: every `COARSE_STRIDE`-th frame solved at `bound_max` from zero.
+        "off": the first bound stays. What ran is in `self.gross` (the stage, the first bound,
+        the bound the solve ended with, the first doubling of the first bound that holds
+        the offsets, the joints at or beyond the first bound, the extra solves)."""
+        first = self.bound
+        if opts.gross == "off" or first >= opts.bound_max:
+            return self.solve(dq0, replace(opts, bound=first))
+        early = opts.gross == "grow" and opts.solver == "projected"
+        if early:
+            self.set_bound(opts.bound_max)
+        dq, history = self.solve(dq0, replace(opts, bound=self.bound))
+        if not at_bound(dq[:self.n_offsets], first):
+            self.set_bound(first)
+            return dq, history
+        solves = 0
+        while opts.gross == "double" and at_bound(dq[:self.n_offsets], self.bound) and self.bound < opts.bound_max:
+            self.set_bound(min(GROW_FACTOR * self.bound, opts.bound_max))
+            dq, more = self.solve(dq, replace(opts, bound=self.bound))
+            history += more
+            solves += 1
+        if not early and opts.gross != "double":
+            x0 = dq0
+            if opts.gross == "coarse":
+                coarse = StanceProblem(self.kin, [s.subset(np.arange(0, len(s.frames), COARSE_STRIDE))
+                                                  for s in self.segments], self.w, self.prior, self.knees,
+                                       opts.bound_max, self.model, self.q_ref, self.held)
+                x0, _ = coarse.solve(np.zeros_like(dq), replace(opts, bound=opts.bound_max))
+                solves += 1
+            self.set_bound(opts.bound_max)
+            dq, more = self.solve(x0, replace(opts, bound=self.bound))
+            history += more
+            solves += 1
+        self.gross = gross_report(opts.gross, first, self.bound, dq[:self.n_offsets], self.kin.legmap.joint_names,
+                                  solves)
+        return dq, history
+
     def solve_trimmed(self, dq0: np.ndarray, opts: FitOptions) -> tuple[np.ndarray, list, list]:
-        """Solve, drop the largest residual frames (`opts.trim_fraction`), solve again
-        from there; (offsets, first solve's history, second's)."""
-        dq, hist1 = self.solve(dq0, opts)
+        """Solve (the bound grown for gross offsets, `solve_gross`), drop the largest
+        residual frames (`opts.trim_fraction`), solve again from there at the bound the
+        first solve ended with; (offsets, first solve's history, second's)."""
+        dq, hist1 = self.solve_gross(dq0, opts)
         hist2: list = []
         if opts.trim_fraction > 0:
             self.trim(dq, opts.trim_fraction)
-            dq, hist2 = self.solve(dq, opts)
+            dq, hist2 = self.solve_gross(dq, opts)
         return dq, hist1, hist2
