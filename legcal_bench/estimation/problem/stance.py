@@ -142,9 +142,10 @@ def gross_warnings(gross: dict | None, dq: np.ndarray, bound: float, names: list
     first = gross["first_bound_rad"]
     beyond = ", ".join(f"{n} {np.rad2deg(v):+.2f}°" for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * first)
     first_name = "the paper's bound" if first == paper.OFFSET_BOUND_RAD else "the bound"
+    holds = (f"; ±{np.rad2deg(gross['holds_rad']):.2f}° would hold them" if gross["holds_rad"] < bound else "")
     return [Finding(f"gross offsets: {beyond} at or beyond {first_name} ±{np.rad2deg(first):.2f}°: solved within "
-                    f"±{np.rad2deg(bound):.2f}° ({gross['stage']} stage; ±{np.rad2deg(gross['holds_rad']):.2f}° "
-                    "would hold them); estimates, not clipped, the same as a solve given that bound by hand. "
+                    f"±{np.rad2deg(bound):.2f}° ({gross['stage']} stage{holds}); estimates, not clipped, the same "
+                    "as a solve given that bound by hand. "
                     "Offsets this large are most likely a re-mounted joint or a multi-turn encoder that lost a "
                     "count: check those joints' mounting and encoder zero", HARMLESS)]
 
