@@ -276,7 +276,7 @@ def write(out: str | Path, summaries: list[dict], trials: list[list[dict]], code
         L += ["", f"## offsets `{label}`", ""]
         if label != c["offsets"]:
             L += [f"Offsets (rad, leg-map order): `{c['offsets']}`", ""]
-        L += [*table(s), "", comparison(s), "", *static_failures(s), f"![pelvis paths]({png.name})"]
+        L += [*table(s), "", comparison(s), "", *static_failures(s), *verdicts(s), f"![pelvis paths]({png.name})"]
         L += ["", *odometry_table(s)]
     for stale in out.iterdir():  # an earlier run's plots this one does not replace (a longer sweep's)
         if PLOT_NAME.fullmatch(stale.name) and stale.name not in plots:

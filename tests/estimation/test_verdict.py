@@ -125,3 +125,20 @@ def test_another_session_set_is_refused(two_sets, tmp_path, capsys, command):
     # The set it was calibrated on passes the same check.
     ok = [str(root / "s0") if a == str(root / "s1") else a for a in args]
     assert main(ok) == 0, capsys.readouterr().err
+
+
+def test_a_do_not_apply_trial_walks_with_no_correction_and_is_counted():
+    """walk-eval's rule: a do-not-apply estimate is not applied (a failed calibration,
+    scored as no correction); its report says how many and why."""
+    from legcal_bench.evaluation.closed_loop import applied
+    from legcal_bench.reports.closed_loop import verdicts
+
+    legmap = load_robot("a3")
+    assert np.all(applied(_result([Finding("not rigid", INVALIDATES)]), legmap) == 0.0)
+    assert np.all(applied(_result([Finding("a slide", DOUBTS)]), legmap) == 0.01)
+    summary = {"verdicts": {APPLY: 1, REVIEW: 1, DO_NOT_APPLY: 1},
+               "rejected": {"count": 1, "seeds": [2], "first_reason": "offsets at the bound"}}
+    (line, _) = verdicts(summary)
+    assert line.startswith("Calibration verdicts: 1 apply, 1 review") and "seeds [2]: failed calibrations" in line
+    assert "offsets at the bound" in line
+    assert verdicts({"verdicts": {APPLY: 0, REVIEW: 0, DO_NOT_APPLY: 0}}) == []
