@@ -66,11 +66,17 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
     from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.robots import load_robot
 
+    from legcal_bench.errors import HoldError
+
     single_thread()
     label, robot, mode, seed = job
     legmap = load_robot(robot)
     with scratch_dir("verdicts") as tmp:
-        collect(CollectConfig(robot=robot, mode=mode, sensors="realistic", seed=seed), tmp, progress=False)
+        try:
+            collect(CollectConfig(robot=robot, mode=mode, sensors="realistic", seed=seed), tmp, progress=False)
+        except HoldError as e:  # a set the robot cannot hold has no result to judge: said, not a crash
+            return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": None,
+                    "not_collected": str(e).split(". Likely cause")[0]}
         result = calibrate_training(get_calibrator("interfoot"), legmap, load_session(tmp, robot=legmap))
         s = score(str(tmp), result, legmap)
     held = s.get("heldout", {}).get("foot_height_rms_true_mm", {})
@@ -132,8 +138,19 @@ def markdown(rows: list[dict], made_by: str, code: str) -> str:
         groups.setdefault((r["robot"], r["mode"]), []).append(r)
     for (robot, mode), g in groups.items():
         n = Counter(r["verdict"] for r in g)
-        rec = sum(r["recovery_rms_deg"] for r in g) / len(g)
-        L.append(f"| {robot} | {mode} | {len(g)} | {n['apply']} | {n['review']} | {n['do-not-apply']} | {rec:.3f} |")
+        judged = [r for r in g if r["verdict"] is not None]
+        if not judged:
+            L.append(f"| {robot} | {mode} | 0 of {len(g)} collected | – | – | – | – |")
+            continue
+        rec = sum(r["recovery_rms_deg"] for r in judged) / len(judged)
+        L.append(f"| {robot} | {mode} | {len(judged)} | {n['apply']} | {n['review']} | {n['do-not-apply']} | "
+                 f"{rec:.3f} |")
+    lost = [r for r in clean if r["verdict"] is None]
+    if lost:
+        L += ["", f"Not collected ({len(lost)} sets: the robot did not hold the posture, so there is no result to "
+                  f"judge): {', '.join(sorted({r['robot'] + ' ' + r['mode'] for r in lost}))}; the first reason: "
+                  f"{lost[0]['not_collected']}."]
+    clean = [r for r in clean if r["verdict"] is not None]
     for mode in sorted({r["mode"] for r in clean}):
         g = [r for r in clean if r["mode"] == mode]
         n = Counter(r["verdict"] for r in g)
