@@ -60,13 +60,13 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
     from legcal_bench.calibrators.base import calibrate_training
     from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import load_session
+    from legcal_bench.errors import HoldError
     from legcal_bench.evaluation.scoring import score
     from legcal_bench.files.parallel import single_thread
     from legcal_bench.files.scratch import scratch_dir
     from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.provenance import code_version, describe
     from legcal_bench.robots import load_robot
-
-    from legcal_bench.errors import HoldError
 
     single_thread()
     label, robot, mode, seed = job
@@ -82,7 +82,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
     held = s.get("heldout", {}).get("foot_height_rms_true_mm", {})
     return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": result.decision,
             "reasons": result.verdict["reasons"], "recovery_rms_deg": s["recovery"]["rms_error_deg"],
-            "heldout_true_mm": held}
+            "heldout_true_mm": held, "code": describe(code_version())}
 
 
 def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: int = 2,
@@ -131,6 +131,10 @@ def markdown(rows: list[dict], made_by: str, code: str) -> str:
          "(its default, sensor-weighted setting). On a clean set every `do-not-apply` is a false refusal and "
          f"every `review` a doubt the data did not earn; the bar: `apply` in at least {APPLY_SHARE:.0%} of the "
          "clean sets of each floor and `do-not-apply` in none.", "",
+         "Cases are kept as they finish and a rerun computes only the missing ones; they were computed at: "
+         + "; ".join(f"{k} ({n} cases)" for k, n in Counter(r.get("code", "a commit not recorded (cases written "
+                                                                "before rows named theirs)") for r in rows).items())
+         + ".", "",
          "| robot | floor | sets | apply | review | do-not-apply | recovery RMS (deg, mean) |",
          "|---|---|---:|---:|---:|---:|---:|"]
     groups: dict = {}
@@ -177,6 +181,6 @@ def markdown(rows: list[dict], made_by: str, code: str) -> str:
 
 def _kind(text: str) -> str:
     """A warning's kind: its words after the recording's name, to the first colon."""
-    head = text.split(": ", 1)
+    head = text.removeprefix("stance ").split(": ", 1)
     body = head[1] if len(head) > 1 and " " not in head[0] else text
     return body.split(":")[0][:80]
