@@ -10,7 +10,7 @@ from pathlib import Path
 
 from legcal_bench import inputs
 from legcal_bench.cli.parsing import pool_options
-from legcal_bench.cli.robots import door
+from legcal_bench.cli.robots import RUN_COUNT, door, floor_mode
 
 
 # What Ctrl-C keeps (`legcal_bench.cli.main` prints it): each finished cell, session set
@@ -20,17 +20,11 @@ BENCH_OUT = "runs/bench"  # the committed leaderboard/ changes only when --out n
 RESUME_CELLS = ("the finished cells and session sets are kept under --out and --data; rerun the same command to "
                 "resume (only the unfinished ones are computed)")
 
-def _mode(field: str, value: str) -> str:
-    from legcal_bench.sim.scene import MODES
-
-    return inputs.choice(field, value, MODES)
-
-
 def _door(a: argparse.Namespace, **more) -> None:
     """bench's and sweep's options checked before any planning: counts, modes, output
     folders, then the scheduler (reachable, and a Dask scheduler: a few seconds at most)."""
-    door(a, seeds=inputs.count, workers=inputs.count, out=inputs.output_folder,
-         **{("modes" if hasattr(a, "modes") else "mode"): _mode}, **more)
+    door(a, seeds=RUN_COUNT, workers=inputs.count, out=inputs.output_folder,
+         **{("modes" if hasattr(a, "modes") else "mode"): floor_mode}, **more)
     if a.scheduler:
         from legcal_bench.benchmark.runner import check_scheduler
 
@@ -49,7 +43,7 @@ def _exit_code(failed: list[dict], total: int) -> int:
 
 
 def cmd_bench(a: argparse.Namespace) -> int:
-    _door(a, effect_seeds=inputs.count, data=inputs.output_folder)
+    _door(a, effect_seeds=RUN_COUNT, data=inputs.output_folder)
     from legcal_bench.benchmark import plan as planning
     from legcal_bench.benchmark.leaderboard import generate
     from legcal_bench.benchmark.runner import failures, run
@@ -209,6 +203,7 @@ def cmd_compare(a: argparse.Namespace) -> int:
 
 
 def cmd_leaderboard(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder)
     from legcal_bench.benchmark.leaderboard import generate
 
     generate(a.out)

@@ -8,13 +8,14 @@ from pathlib import Path
 
 from legcal_bench import inputs
 from legcal_bench.cli.parsing import pool_options
-from legcal_bench.cli.robots import door
+from legcal_bench.cli.robots import RUN_COUNT, door, floor_mode
 
 DEFAULT_FIXTURE = Path("tests/fixtures/regression.json")
 RUNS = "runs"  # where every report command writes unless --out names a committed report
 
 
 def cmd_reproduce(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder)
     from legcal_bench.reports.reproduce import reproduce
 
     print(reproduce(a.out, progress=not a.quiet))
@@ -22,6 +23,7 @@ def cmd_reproduce(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_speed(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, repeats=RUN_COUNT, rounds=RUN_COUNT)
     from legcal_bench.reports.bench_speed import rerender, run_bench_speed
 
     if a.rerender:
@@ -33,6 +35,7 @@ def cmd_bench_speed(a: argparse.Namespace) -> int:
 
 
 def cmd_bench_env(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seed=inputs.seed, modes=floor_mode)
     from legcal_bench.reports.bench_env import run_bench_env
 
     print(run_bench_env(a.robots, a.modes, a.out, seed=a.seed, progress=not a.quiet))
@@ -40,6 +43,7 @@ def cmd_bench_env(a: argparse.Namespace) -> int:
 
 
 def cmd_data_checks(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seeds=inputs.seed, offsets=_offsets)
     from legcal_bench.reports.robots_check import run_data_checks
 
     print(run_data_checks(a.out, a.robots, a.seeds, a.offsets, a.modes, short=a.short, defects=not a.no_defects,
@@ -57,6 +61,7 @@ def cmd_verdicts(a: argparse.Namespace) -> int:
 
 
 def cmd_robots_check(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seeds=RUN_COUNT)
     from legcal_bench.reports.robots_check import run_robots_check
 
     print(run_robots_check(a.out, seeds=a.seeds, progress=not a.quiet, extra=a.extra))
@@ -68,6 +73,7 @@ def cmd_regression(a: argparse.Namespace) -> int:
     from legcal_bench.files.scratch import scratch_dir
     from legcal_bench.reports import regression
 
+    door(a, workers=inputs.count, **({"fixture": inputs.output_file} if a.update else {}))
     if a.update:
         regression.update(a.fixture, workers=a.workers, progress=not a.quiet)
         print(f"wrote {a.fixture}: the numbers of the code at hand are now the reference")
@@ -84,6 +90,27 @@ def cmd_regression(a: argparse.Namespace) -> int:
     return 1 if problems else 0
 
 
+def _offsets(field: str, spec: str) -> None:
+    """An offsets spec of the clean sets, understood before any set is collected (a spec
+    the collection does not understand would fail every set, one by one): a preset is
+    resolved on a3; a list of radians, whose length is each robot's, must be numbers."""
+    from legcal_bench.errors import ConfigError, LegcalError
+
+    if "," in spec:
+        for part in spec.split(","):
+            inputs.number(f"{field} {spec!r}: the value", part, fix="one radian per leg joint, comma-separated")
+        return
+    import numpy as np
+
+    from legcal_bench.robots import load_robot
+    from legcal_bench.sim.offsets import resolve_offsets
+
+    try:
+        resolve_offsets(spec, load_robot("a3"), np.random.default_rng(0))
+    except LegcalError as e:
+        raise ConfigError(f"{field}: {e}") from None
+
+
 def _case_table(a: argparse.Namespace, module, option: str, known, name: str, made_by: str, **build) -> dict:
     """A per-robot, per-case, per-seed report (`module.build` / `markdown`): the choices
     in `--<option>` checked against `known`, written to `--out` as `name`.md/.json."""
@@ -95,8 +122,6 @@ def _case_table(a: argparse.Namespace, module, option: str, known, name: str, ma
     unknown = sorted(set(chosen) - set(known))
     if unknown:
         raise ConfigError(f"--{option} {unknown}: use {option} from {list(known)}")
-    if a.seeds < 1:
-        raise ConfigError(f"--seeds {a.seeds}: need at least 1")
     code = code_version()
     data = module.build(a.robots, chosen, a.seeds, a.workers, progress=not a.quiet, **build)
     data.update(made_by=made_by, code=code)
@@ -112,7 +137,14 @@ def _fill_default(a: argparse.Namespace, option: str, default) -> None:
         setattr(a, option, list(default))
 
 
+def _table_door(a: argparse.Namespace) -> None:
+    """A per-robot, per-case report's options, before its report module (which loads the
+    simulation) is imported: the folder, the seeds and the workers."""
+    door(a, out=inputs.output_folder, seeds=RUN_COUNT, workers=inputs.count)
+
+
 def cmd_effects_table(a: argparse.Namespace) -> int:
+    _table_door(a)
     from pathlib import Path
 
     from legcal_bench.reports import effects_table
@@ -144,18 +176,21 @@ def _cases_report(a: argparse.Namespace, command: str, module, known, name: str)
 
 
 def cmd_contact_table(a: argparse.Namespace) -> int:
+    _table_door(a)
     from legcal_bench.reports import contact_table
 
     return _cases_report(a, "contact-table", contact_table, contact_table.CASES, "contact_table")
 
 
 def cmd_contact_floor(a: argparse.Namespace) -> int:
+    _table_door(a)
     from legcal_bench.reports import contact_floor
 
     return _cases_report(a, "contact-floor", contact_floor, contact_floor.KNOWN_CASES, "contact_floor")
 
 
 def cmd_contact_holds(a: argparse.Namespace) -> int:
+    _table_door(a)
     from legcal_bench.reports import contact_holds
 
     _fill_default(a, "robots", contact_holds.default_robots())

@@ -26,6 +26,18 @@ def door(a: argparse.Namespace, **checks) -> None:
 
 # Checks `door` takes, beside inputs.seed, inputs.positive, inputs.count, inputs.output_folder, inputs.output_file.
 COUNT0 = partial(inputs.count, low=0)  # a count where none is meaningful
+# Seeds, trials, repeats to run: each is a set collected, a walk or a probe run, and a plan
+# holds one entry for each; beyond this many, a typo (whose plan would exhaust memory and
+# whose run would not end), refused with the number.
+MAX_RUNS = 100_000
+RUN_COUNT = partial(inputs.count, high=MAX_RUNS, fix="seeds, trials or repeats to run")
+
+
+def floor_mode(field: str, value: str) -> str:
+    """A floor mode of the simulation (kinematic, weld, contact); a misspelling named."""
+    from legcal_bench.sim.scene import MODES
+
+    return inputs.choice(field, value, MODES)
 
 RENDER_OUT = "runs/render/robot.png"
 

@@ -10,11 +10,16 @@ from functools import partial
 
 from legcal_bench import inputs
 from legcal_bench.cli.parsing import pool_options
-from legcal_bench.cli.robots import COUNT0, door, robot_args
+from legcal_bench.cli.robots import COUNT0, MAX_RUNS, RUN_COUNT, door, robot_args
 from legcal_bench.evaluation.distill_config import DistillConfig
 from legcal_bench.sim.names import PRESETS_HELP, SENSOR_PRESET_NAMES
 
 SENSORS = partial(inputs.choice, options=SENSOR_PRESET_NAMES)
+# A walk keeps every control step (the path, the strikes, a strip's frames) in memory: an
+# hour is more than any evaluation walks; beyond, a typo, refused with the number.
+MAX_WALK_S = 3600.0
+WALK_SECONDS = partial(inputs.positive, high=MAX_WALK_S, fix="seconds of each walk")
+TRIALS0 = partial(inputs.count, low=0, high=MAX_RUNS, fix="paired trials, 0 for one walk")
 WALK_EVAL_OUT = "runs/walk-eval"
 TRAIN_OUT = "runs/train-policy"  # + /<robot>
 
@@ -31,7 +36,7 @@ def _correction(path, legmap):
 
 
 def cmd_walk(a: argparse.Namespace) -> int:
-    door(a, seconds=inputs.positive, trials=COUNT0, seed=inputs.seed, strip_every=inputs.positive, sensors=SENSORS,
+    door(a, seconds=WALK_SECONDS, trials=TRIALS0, seed=inputs.seed, strip_every=inputs.positive, sensors=SENSORS,
          out=inputs.output_file, strip=inputs.output_file)
     import numpy as np
 
@@ -121,7 +126,7 @@ def cmd_walk(a: argparse.Namespace) -> int:
 
 
 def cmd_walk_eval(a: argparse.Namespace) -> int:
-    door(a, trials=inputs.count, seconds=inputs.positive, sweep=inputs.positive, workers=inputs.count,
+    door(a, trials=RUN_COUNT, seconds=WALK_SECONDS, sweep=inputs.positive, workers=inputs.count,
          sensors=SENSORS, static_sensors=SENSORS, out=inputs.output_folder)
     from legcal_bench.benchmark.runner import check_scheduler
     from legcal_bench.calibrators.registry import get_calibrator, parse_options
@@ -185,11 +190,8 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
 def cmd_train_policy(a: argparse.Namespace) -> int:
     from legcal_bench.errors import ConfigError
 
-    door(a, seed=inputs.seed, offsets_deg=inputs.non_negative, out=inputs.output_folder)
-    if a.iterations < 1 or a.rollouts < 1:
-        raise ConfigError(f"--iterations {a.iterations} / --rollouts {a.rollouts}: need at least 1 each")
-    if a.selection_walks < 0:
-        raise ConfigError(f"--selection-walks {a.selection_walks}: need 0 or more random patterns")
+    door(a, seed=inputs.seed, offsets_deg=inputs.non_negative, iterations=RUN_COUNT, rollouts=RUN_COUNT,
+         selection_walks=partial(COUNT0, high=MAX_RUNS), out=inputs.output_folder)
     from pathlib import Path
 
     from legcal_bench.evaluation.distill import DistillConfig, export, train  # the training module's (tests shorten it)
@@ -273,7 +275,7 @@ def add_commands(sub) -> None:
                    help="magnitudes (deg, > 0) to sweep, e.g. 1 2 3 (replacing <deg> of paper@ or random:; default: "
                         "no sweep, --offsets as given)")
     e.add_argument("--trials", type=int, default=35, help="trials per offsets magnitude, at least 1 (default 35)")
-    e.add_argument("--seconds", type=float, default=20.0, help="seconds of each walk, > 0 (default 20)")
+    e.add_argument("--seconds", type=float, default=20.0, help="seconds of each walk, > 0, at most 3600 (default 20)")
     e.add_argument("--calibrator", default="interfoot", help="registered calibrator of the static calibration "
                                                              "(default interfoot)")
     e.add_argument("--setting", default=None, help="the calibrator's setting (default: its sensor-matched variant "
@@ -319,7 +321,7 @@ def _walk_options(w: argparse.ArgumentParser) -> None:
     w.add_argument("--correction", default=None, help="a calibration result JSON of this robot: its offsets are "
                                                       "applied as the robot applies them (q_enc + dq_hat; default: "
                                                       "none, uncorrected)")
-    w.add_argument("--seconds", type=float, default=20.0, help="seconds to walk, > 0 (default 20)")
+    w.add_argument("--seconds", type=float, default=20.0, help="seconds to walk, > 0, at most 3600 (default 20)")
     w.add_argument("--seed", type=int, default=0, help="noise and initial-jitter seed (one walk): an integer in "
                                                        "[0, 2^32 - 1] (default 0)")
     w.add_argument("--trials", type=int, default=0, help="paired trials (seeds 0..N-1): nominal and with offsets "
