@@ -175,6 +175,11 @@ def cmd_walk_eval(a: argparse.Namespace) -> int:
         print(f"resumed: {len(store.reused)} of {total} trial(s) taken from {a.out}/{TRIALS_DIR} (finished by an "
               f"earlier run with the same settings), {len(store.written)} run now")
     for s in summaries:
+        rej = s.get("rejected") or {}
+        if rej.get("count"):
+            print(f"offsets {s['config']['offsets']}: {rej['count']} of {s['config']['trials']} trial(s) failed "
+                  f"calibration (verdict do-not-apply; seeds {rej['seeds']}): walked and scored as no correction; "
+                  f"the first reason: {rej['first_reason']}")
         if s["calibrated"] == 0:
             print(f"offsets {s['config']['offsets']}: no trial was calibrated (the static session set failed in all "
                   f"{s['config']['trials']}; first reason: {s['static_failed']['first_reason']}); no corrected walk")
