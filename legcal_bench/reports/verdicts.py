@@ -90,6 +90,7 @@ def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: i
     from legcal_bench.files.parallel import map_with_progress
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
+    from legcal_bench.robots import robot_label
 
     out = Path(out)
     cases = out / "cases"
@@ -100,7 +101,7 @@ def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: i
 
     def path(job) -> Path:
         label, _, mode, seed = job
-        return cases / f"{Path(label).name.replace('.legmap.yaml', '')}_{mode}_{seed}.json"
+        return cases / f"{robot_label(label)}_{mode}_{seed}.json"
 
     todo = [j for j in jobs if not path(j).is_file()]
     cases.mkdir(parents=True, exist_ok=True)

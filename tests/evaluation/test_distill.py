@@ -71,7 +71,7 @@ def test_train_policy_names_a_missing_teacher_and_bad_counts(tmp_path, capsys, t
     assert main(["train-policy", "--robot", str(testbot_legmap), "--out", str(tmp_path / "x")]) == 2
     assert "--teacher" in capsys.readouterr().err
     assert main(["train-policy", "--robot", "a3", "--iterations", "0", "--out", str(tmp_path / "x")]) == 2
-    assert "--iterations 0" in capsys.readouterr().err
+    assert "--iterations = 0" in capsys.readouterr().err
     assert main(["train-policy", "--robot", "a3", "--selection-walks", "-1", "--out", str(tmp_path / "x")]) == 2
     assert "--selection-walks -1" in capsys.readouterr().err
     bad = tmp_path / "t.yaml"
