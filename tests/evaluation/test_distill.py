@@ -73,7 +73,7 @@ def test_train_policy_names_a_missing_teacher_and_bad_counts(tmp_path, capsys, t
     assert main(["train-policy", "--robot", "a3", "--iterations", "0", "--out", str(tmp_path / "x")]) == 2
     assert "--iterations = 0" in capsys.readouterr().err
     assert main(["train-policy", "--robot", "a3", "--selection-walks", "-1", "--out", str(tmp_path / "x")]) == 2
-    assert "--selection-walks -1" in capsys.readouterr().err
+    assert "--selection-walks = -1" in capsys.readouterr().err
     bad = tmp_path / "t.yaml"
     bad.write_text("format: legcal-teacher/1\nfeedback: {roll_gain: 1}\n")
     assert main(["train-policy", "--robot", "a3", "--teacher", str(bad), "--out", str(tmp_path / "x")]) == 2
