@@ -154,7 +154,7 @@ def output_folder(field: str, path) -> Path:
     if path is None or str(path).strip() == "":
         raise ConfigError(f"{field}: no folder given (give a folder to write into)")
     p = Path(path).expanduser()
-    if p.exists() and not p.is_dir():
+    if _not_folder(p):
         raise ConfigError(f"{field} {str(path)!r}: is a file, not a folder (give a folder to write into)")
     _writable(field, str(path), p)
     return p
@@ -169,16 +169,44 @@ def output_file(field: str, path) -> Path:
     if p.is_dir():
         raise ConfigError(f"{field} {str(path)!r}: is a folder, not a file (give a file path)")
     folder = p.parent if str(p.parent) else Path(".")
-    if folder.exists() and not folder.is_dir():
+    if _not_folder(folder):
         raise ConfigError(f"{field} {str(path)!r}: {str(folder)!r} is a file, so the file cannot be made in it "
                           f"(give a path in a folder)")
     _writable(field, str(path), folder)
     return p
 
 
+RACE_TRIES = 5  # another process's check may remove, between two steps, a folder it made
+
+
 def _writable(field: str, given: str, folder: Path) -> None:
     """Prove `folder` writable: make its missing parents and itself, create and delete a
-    probe file in it, remove the folders made (`output_folder`)."""
+    probe file in it, remove the folders made (`output_folder`). Two checks at once under
+    one new parent (parallel commands, test workers) may see the other remove a folder
+    it made while this one stands in it: the check starts over, `RACE_TRIES` times."""
+    for attempt in range(RACE_TRIES):
+        try:
+            return _writable_once(field, given, folder, last=attempt == RACE_TRIES - 1)
+        except _Raced:
+            continue
+
+
+def _not_folder(path: Path) -> bool:
+    """Something other than a folder is at `path` (one look: a folder removed meanwhile
+    is not taken for a file)."""
+    import stat
+
+    try:
+        return not stat.S_ISDIR(os.stat(path).st_mode)
+    except (FileNotFoundError, NotADirectoryError):
+        return False
+
+
+class _Raced(Exception):
+    """A folder vanished between two steps of a check (another check removed it)."""
+
+
+def _writable_once(field: str, given: str, folder: Path, last: bool) -> None:
     import tempfile  # on the check's path only: the CLI's start-up stays light
 
     missing = []
@@ -188,7 +216,7 @@ def _writable(field: str, given: str, folder: Path) -> None:
         if nearest.parent == nearest:
             break
         nearest = nearest.parent
-    if nearest.exists() and not nearest.is_dir():
+    if _not_folder(nearest):
         raise ConfigError(f"{field} {given!r}: {str(nearest)!r} is a file, so the folder cannot be made there "
                           f"(give a folder path)")
     made = []
@@ -203,12 +231,16 @@ def _writable(field: str, given: str, folder: Path) -> None:
             made.append(d)
     except OSError as e:
         _remove(made)
+        if isinstance(e, (FileNotFoundError, FileExistsError)) and not last:  # a folder came and went meanwhile
+            raise _Raced from None
         raise ConfigError(f"{field} {given!r}: cannot make the folder {str(d)!r} ({e.strerror or e}); give a folder "
                           f"you can write to") from None
     try:
         fd, probe = tempfile.mkstemp(prefix=PROBE_PREFIX, dir=folder)
     except OSError as e:
         _remove(made)
+        if isinstance(e, FileNotFoundError) and not last:
+            raise _Raced from None
         raise ConfigError(f"{field} {given!r}: cannot write into {str(folder)!r} ({e.strerror or e}); give a folder "
                           f"you can write to") from None
     os.close(fd)

@@ -109,3 +109,26 @@ def test_text_files_are_utf8_and_files(tmp_path):
         inputs.read_text("leg map", tmp_path, "leg map")
     with pytest.raises(ConfigError, match="no such leg map"):
         inputs.read_text("leg map", tmp_path / "none.yaml", "leg map")
+
+
+def _check_many(args):
+    root, i = args
+    from legcal_bench import inputs as _inputs
+
+    failures = []
+    for _ in range(300):
+        try:
+            _inputs.output_folder("--out", f"{root}/runs/bench/data{i % 2}")
+        except ConfigError as e:
+            failures.append(str(e))
+    return failures
+
+
+def test_checks_at_once_under_one_new_parent_do_not_refuse_each_other(tmp_path):
+    """Test workers (and parallel commands) check outputs under one new parent at once:
+    one removing the folders it made must not make the other's check fail (it did:
+    "cannot make the folder 'runs/bench/data'", or a vanished folder taken for a file)."""
+    import multiprocessing
+
+    with multiprocessing.get_context("fork").Pool(4) as pool:
+        assert pool.map(_check_many, [(str(tmp_path), i) for i in range(4)]) == [[]] * 4
