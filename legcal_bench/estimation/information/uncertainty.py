@@ -76,8 +76,13 @@ def uncertainty_warnings(post: dict) -> list[str]:
     return out
 
 
+def at_bound_mask(dq: np.ndarray, bound: float) -> np.ndarray:
+    """Which offsets sit at `bound` (within `BOUND_FRACTION` of it): the one rule."""
+    return np.abs(np.asarray(dq, dtype=float)) >= BOUND_FRACTION * bound
+
+
 def bound_warnings(dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
-    at = [n for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * bound]
+    at = [n for n, hit in zip(names, at_bound_mask(dq, bound)) if hit]
     return ([Finding(f"offsets at the bound ±{np.rad2deg(bound):.2f}°: {at}: the data push them further than the "
                      "bound allows (offsets that large, data that do not determine them, or the wrong robot/leg "
                      "map); the values are not estimates", INVALIDATES)] if at else [])

@@ -29,7 +29,7 @@ from legcal_bench.data.recording import Recording
 from legcal_bench.errors import CalibrationError
 from legcal_bench.estimation.imu.levelling import levelling_rotations, up_in_base
 from legcal_bench.estimation.information.noise import noise_sigmas
-from legcal_bench.estimation.information.uncertainty import BOUND_FRACTION
+from legcal_bench.estimation.information.uncertainty import BOUND_FRACTION, at_bound_mask
 from legcal_bench.estimation.modelgap.effects import EffectModel, EffectSegment, SegmentData
 from legcal_bench.estimation.problem.preprocess import PreprocessConfig, filter_warnings, select_frames
 from legcal_bench.estimation.problem.problem import Block, Problem
@@ -114,7 +114,7 @@ def gross_report(stage: str, first: float, bound: float, dq: np.ndarray, names: 
     while top >= BOUND_FRACTION * holds and holds < bound:
         holds = min(GROW_FACTOR * holds, bound)
     return {"stage": stage, "first_bound_rad": first, "bound_rad": bound, "holds_rad": holds,
-            "beyond_first_bound": [n for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * first],
+            "beyond_first_bound": [n for n, hit in zip(names, at_bound_mask(dq, first)) if hit],
             "solves": solves}
 
 
@@ -129,7 +129,7 @@ def bound_diagnostics(first: float, final: float, gross: dict | None) -> dict:
 
 def at_bound(dq: np.ndarray, bound: float) -> bool:
     """Does an offset sit at `bound` (within `BOUND_FRACTION` of it)?"""
-    return bool(np.any(np.abs(dq) >= BOUND_FRACTION * bound))
+    return bool(at_bound_mask(dq, bound).any())
 
 
 def gross_warnings(gross: dict | None, dq: np.ndarray, bound: float, names: list[str]) -> list[str]:
@@ -140,7 +140,8 @@ def gross_warnings(gross: dict | None, dq: np.ndarray, bound: float, names: list
     if gross is None or at_bound(dq[:len(names)], bound):
         return []
     first = gross["first_bound_rad"]
-    beyond = ", ".join(f"{n} {np.rad2deg(v):+.2f}°" for n, v in zip(names, dq) if abs(v) >= BOUND_FRACTION * first)
+    beyond = ", ".join(f"{n} {np.rad2deg(v):+.2f}°" for n, v, hit in zip(names, dq, at_bound_mask(dq[:len(names)], first))
+                       if hit)
     first_name = "the paper's bound" if first == paper.OFFSET_BOUND_RAD else "the bound"
     holds = (f"; ±{np.rad2deg(gross['holds_rad']):.2f}° would hold them" if gross["holds_rad"] < bound else "")
     return [Finding(f"gross offsets: {beyond} at or beyond {first_name} ±{np.rad2deg(first):.2f}°: solved within "
