@@ -70,14 +70,18 @@ def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
     total = sum(info.values()) + prior
     means = problem.means_at(dq)
-    r, J = fr.stacked(problem.sf, problem.sg, cols)  # the noise-weighted problem's rows
-    owner = np.concatenate([[s.recording] * fr.r.shape[1] * len(s.frames) for s in segs])
+    zw = np.einsum("nij,nj->ni", W, fr.r)
     prior_rows = np.sqrt(prior)[nj:]
-    # The offsets' change without each stance: one Gauss-Newton step on the other rows
-    # (the IMU tilt within its prior).
-    delta = {n: -np.linalg.lstsq(np.vstack([J[owner != n], prior_rows]),
-                                 np.r_[r[owner != n], np.zeros(len(prior_rows))], rcond=None)[0][:nj]
-             for n in names}
+    # The offsets' change without each stance: one Gauss-Newton step on the other
+    # stances' whitened rows (the IMU tilt within its prior): the estimate whose
+    # covariance `cov` is. (A step on the row-weighted rows, as before issue #58, has two
+    # to three times that spread, more where a stance's posture extrapolates the others':
+    # clean realistic sets read as soles off one plane at chi2 ~20-200 on 3 dof.)
+    delta = {}
+    for n in names:
+        others = fr.recording != n
+        A = np.vstack([Jw[others].reshape(-1, len(cols)), prior_rows])
+        delta[n] = -np.linalg.lstsq(A, np.r_[zw[others].ravel(), np.zeros(len(prior_rows))], rcond=None)[0][:nj]
     items = []
     for i, s in enumerate(segs):
         m = fr.segment == i

@@ -10,18 +10,17 @@ clean and biases every offset through its flat-ground rows.
 The check, per stance s: c_s, the right sole's tilt about x and y (rad) and its height
 (m) in the left sole's frame at M_s, evaluated at the offsets of the other stances
 (zero on one plane): the offsets re-estimated without s (one Gauss-Newton step of
-the noise-weighted problem from its solution: exact for linear least squares), carried
+the whitened problem of the other stances: exact for linear least squares), carried
 to c_s. Its covariance is
 
-    Sigma_s = F^2 (D Sigma_M D^T + J_c Cov(dq_-s) J_c^T),
+    Sigma_s = D Sigma_M D^T + J_c Cov(dq_-s) J_c^T,
 
 Sigma_M = sigma_q^2 / N^2 sum_k G_k G_k^T the mean's covariance from encoder noise
 (G_k the frame's inter-foot Jacobian), J_c = D mean_k G_k, Cov(dq_-s) the noise-only
 covariance of the other stances' estimate (the inverse of their whitened information,
 `legcal_bench.estimation.information.whitening`; with a fixed error of the IMU's vertical as a
-nuisance within the declared tilt bound, `legcal_bench.estimation.checks.contact`), F =
-`SYSTEMATIC_FACTOR` for the error that is not white noise. chi2 with 3 degrees of freedom per contact
-segment; a stance is flagged at a family-wise false-alarm rate `ALPHA` over the
+nuisance within the declared tilt bound, `legcal_bench.estimation.checks.contact`).
+chi2 with 3 degrees of freedom per contact segment; a stance is flagged at a family-wise false-alarm rate `ALPHA` over the
 stances (Bonferroni) when its soles are also off one plane by more than `MIN_TILT_RAD`
 or `MIN_HEIGHT_M` (smaller departures are below what matters at the encoder's
 resolution, whatever their significance).
@@ -39,13 +38,6 @@ import numpy as np
 from scipy.stats import chi2 as chi2_dist
 
 ALPHA = 0.01  # family-wise false-alarm rate over a calibration's stances
-# The declared noise is white; the accelerometer's motion-compensation error is not (it
-# follows the posture motion), and it moves each stance's offsets-from-the-others
-# together: on clean weld data (no contact error) the departures reached chi2 ~ 60 on 3
-# dof (seeds 3, 10-13, inspected by hand). The departure's standard deviations are taken
-# this many times the white-noise ones (the per-stance chi2 divided by its square);
-# `legcal-bench contact-table` measures the false alarms on other seeds.
-SYSTEMATIC_FACTOR = 3.0
 # Practical floor: a departure this small moves the offsets by less than the encoder
 # noise floor of a 4-stance fit (~0.001 deg); a significant but smaller one is not flagged.
 MIN_TILT_RAD = np.deg2rad(0.01)
@@ -79,7 +71,7 @@ class StanceContact:
     height_m: float
     fit_tilt_rad: tuple[float, float]  # the same at the offsets fitted to every stance
     fit_height_m: float
-    std: tuple[float, float, float]  # of the departure (rad, rad, m), with SYSTEMATIC_FACTOR
+    std: tuple[float, float, float]  # of the departure (rad, rad, m)
     chi2: float
     dof: int
     p_value: float
@@ -117,7 +109,7 @@ def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA) ->
             Gm = G.mean(axis=0)
             sigma_M = sigma_q**2 / n**2 * np.einsum("nij,nkj->ik", G, G)
             Jc = D @ Gm
-            cov = SYSTEMATIC_FACTOR**2 * (D @ sigma_M @ D.T + Jc @ s["cov"] @ Jc.T)
+            cov = D @ sigma_M @ D.T + Jc @ s["cov"] @ Jc.T
             # The departure: c at the offsets without this stance, to first order (on one
             # plane: zero).
             e = c + Jc @ s["delta"]
