@@ -8,7 +8,7 @@ from functools import partial
 from pathlib import Path
 
 from legcal_bench import inputs
-from legcal_bench.cli.robots import COUNT0, door, robot_args
+from legcal_bench.cli.robots import COUNT0, door, frame_count, robot_args
 from legcal_bench.errors import ConfigError
 
 CALIBRATE_OUT = "runs/calibrate/result.json"
@@ -184,7 +184,7 @@ def cmd_check(a: argparse.Namespace) -> int:
 def cmd_design(a: argparse.Namespace) -> int:
     """Predicted information of the default stances against a greedy E-optimal choice
     of sampled stances, each screened in simulation for the hold check (weld, contact)."""
-    door(a, count=inputs.count, frames=inputs.count, candidates=inputs.count, seed=inputs.seed,
+    door(a, count=inputs.count, frames=frame_count, candidates=inputs.count, seed=inputs.seed,
          margin=partial(inputs.number, low=0.0, low_open=True, high=1.0,
                         fix="a fraction of the pelvis hold limit"),
          contact_seeds=COUNT0, weld_seeds=COUNT0, budget=inputs.number, out=inputs.output_file, plot=inputs.output_file)
@@ -259,7 +259,7 @@ def cmd_design(a: argparse.Namespace) -> int:
 def cmd_excite(a: argparse.Namespace) -> int:
     """A learned open-loop excitation policy on the static env's information-gain reward,
     against no motion and the protocol's motion."""
-    door(a, frames=inputs.count, iterations=inputs.count, population=inputs.count, elite=inputs.count,
+    door(a, frames=frame_count, iterations=inputs.count, population=inputs.count, elite=inputs.count,
          seed=inputs.seed, out=inputs.output_file)
     from legcal_bench.evaluation.excitation import learn_excitation
     from legcal_bench.provenance import code_version, describe

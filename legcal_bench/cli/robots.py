@@ -33,6 +33,15 @@ MAX_RUNS = 100_000
 RUN_COUNT = partial(inputs.count, high=MAX_RUNS, fix="seeds, trials or repeats to run")
 
 
+def frame_count(field: str, value) -> int:
+    """A budget of frames to simulate (`design`, `excite`): at most what a recording of this
+    library holds (`legcal_bench.logs.mapping.MAX_FRAMES`, 11 h at 50 Hz); beyond it a
+    typo whose time array alone would take gigabytes, refused with the number."""
+    from legcal_bench.logs.mapping import MAX_FRAMES  # on the check's path only: start-up stays light
+
+    return inputs.count(field, value, high=MAX_FRAMES, fix=f"a recording holds at most {MAX_FRAMES:,} frames")
+
+
 def floor_mode(field: str, value: str) -> str:
     """A floor mode of the simulation (kinematic, weld, contact); a misspelling named."""
     from legcal_bench.sim.scene import MODES

@@ -297,6 +297,8 @@ CASES += [(argv, option, UNWRITABLE if words is None else words) for argv, optio
     (["walk-eval", *A3_POLICY, "--seconds", "1e5"], "--seconds", ["3600"]),
     (["walk-eval", *A3_POLICY, "--trials", "1000000"], "--trials", ["100000"]),
     (["bench", "--seeds", "1000000000", *OUT], "--seeds", ["1000000000", "100000"]),
+    (["design", "--frames", "1000000000"], "--frames", ["1000000000", "[1, 2000000]"]),
+    (["excite", "--frames", "2000001"], "--frames", ["2000001", "2,000,000 frames"]),
     (["bench", "--suite", "modelgap", "--effect-seeds", "1000000", *OUT], "--effect-seeds", ["100000"]),
     (["sweep", "--seeds", "1000000", *OUT], "--seeds", ["100000"]),
     (["train-policy", "--iterations", "0", *OUT], "--iterations", []),
