@@ -76,7 +76,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
             collect(CollectConfig(robot=robot, mode=mode, sensors="realistic", seed=seed), tmp, progress=False)
         except HoldError as e:  # a set the robot cannot hold has no result to judge: said, not a crash
             return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": None,
-                    "not_collected": str(e).split(". Likely cause")[0]}
+                    "not_collected": str(e).split(". Likely cause")[0], "code": describe(code_version())}
         result = calibrate_training(get_calibrator("interfoot"), legmap, load_session(tmp, robot=legmap))
         s = score(str(tmp), result, legmap)
     held = s.get("heldout", {}).get("foot_height_rms_true_mm", {})
