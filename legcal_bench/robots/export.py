@@ -67,7 +67,9 @@ import yaml
 
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.files.atomic import atomic_write_dir, atomic_write_text
+from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.robots.urdf import urdf_text
 
 FORMAT = "legcal-offsets/1"
 CONVENTION = "q = q_enc + offset"
@@ -110,7 +112,7 @@ def fold_into_mjcf(legmap: LegMap, offsets_rad: dict[str, float], out_dir: str |
         raise ConfigError(f"--mjcf-out {out_dir} exists: give a new folder (the corrected model is written whole)")
     offsets_document(legmap, offsets_rad)  # checks every leg joint has a value
     compiled = mujoco.MjModel.from_xml_path(str(legmap.mjcf))
-    model = mjcf.from_path(str(legmap.mjcf))
+    model = mjcf_element(legmap.mjcf)
     degrees = (model.compiler.angle or "degree") == "degree"
     for name in legmap.joint_names:
         joint = model.find("joint", name)
@@ -237,7 +239,7 @@ def _folded_urdf_text(legmap: LegMap, offsets: dict[str, float], out_dir: Path) 
     """The URDF copy's text (see the module docstring); `out_dir` is where it will live."""
     src = Path(legmap.urdf)
     where = str(legmap.source or src)
-    root = _parse_urdf(src.read_text(), where)
+    root = _parse_urdf(urdf_text(src, where), where)
     joints = {j.get("name"): j for j in root.findall("joint")}
     for name, dq in offsets.items():
         j = joints.get(name)
@@ -346,7 +348,7 @@ def check_urdf_fold(legmap: LegMap, offsets_rad: dict[str, float], folded_urdf: 
     q_enc + offsets (Pinocchio, fixed seed); 0 up to rounding when the fold is right."""
     if legmap.urdf is None:
         raise LegMapError(f"{legmap.source}: robot {legmap.name} is described by an MJCF, not a URDF")
-    return _urdf_fk_error(Path(legmap.urdf).read_text(), Path(folded_urdf).read_text(),
+    return _urdf_fk_error(urdf_text(legmap.urdf, str(legmap.source or legmap.urdf)), Path(folded_urdf).read_text(),
                           _finite_offsets(legmap, offsets_rad))
 
 
@@ -364,7 +366,7 @@ def fold_into_urdf(legmap: LegMap, offsets_rad: dict[str, float], out_path: str 
         raise ConfigError(f"--urdf-out {out_path} exists: give a new file name (an existing file is not replaced)")
     offsets = _finite_offsets(legmap, offsets_rad)
     text = _folded_urdf_text(legmap, offsets, out_path.parent)
-    err = _urdf_fk_error(Path(legmap.urdf).read_text(), text, offsets)
+    err = _urdf_fk_error(urdf_text(legmap.urdf, str(legmap.source or legmap.urdf)), text, offsets)
     if not err <= FK_TOL:
         raise LegMapError(f"the URDF with the offsets folded in does not reproduce the calibrated kinematics "
                           f"(largest frame difference {err:.3g} > {FK_TOL:g}); nothing written to {out_path}")

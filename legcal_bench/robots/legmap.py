@@ -27,7 +27,7 @@ CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
 ABSENT_ALLOWED = ("ankle_roll",)
 # The leg map's keys (a closed format: a misspelt key is refused, with the closest named).
 TOP_FIELDS = ("schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad", "held_joints_rad",
-              "servo_gains", "absent_roles")
+              "servo_gains", "absent_roles", "packages")
 LEG_FIELDS = ("joints", "sole", "corners", "ft")
 FRAME_FIELDS = ("site", "body", "pos", "rpy")
 
@@ -86,6 +86,9 @@ class LegMap:
     # A robot described by a URDF: Pinocchio reads this; `mjcf` is then MuJoCo's
     # compilation of it (`legcal_bench.robots.urdf`).
     urdf: Path | None = None
+    # The folders of the ROS packages the URDF's `package://` URIs name (beside the
+    # environment's, `legcal_bench.robots.urdf.find_package`).
+    packages: dict[str, Path] = field(default_factory=dict)
 
     @property
     def model_file(self) -> Path:
@@ -159,6 +162,9 @@ class LegMap:
             d["held_joints_rad"] = dict(self.held_joints_rad)
         if self.servo_gains:
             d["servo_gains"] = {k: list(v) for k, v in self.servo_gains.items()}
+        if self.packages:
+            d["packages"] = {k: (_relpath(v, mjcf_relative_to) if mjcf_relative_to is not None else str(v))
+                             for k, v in self.packages.items()}
         return d
 
 
@@ -362,6 +368,20 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
                               "(N m s/rad); give the joint servo's PD gains [kp, kd], or leave the joint out to use "
                               "the MJCF's or the default gains")
         gains[k] = (kp, kd)
+    packages = {}
+    for k, v in _optional_mapping(data, "packages", where, "ROS package names to their folders").items():
+        _name(k, f"{where}: packages key", "the name of a ROS package the URDF's package:// URIs name")
+        if not isinstance(v, str) or not v.strip():
+            raise LegMapError(f"{where}: packages.{k} is {shown(v)}: give the package's folder, relative to the leg "
+                              "map or absolute")
+        folder = Path(v).expanduser()
+        folder = folder if folder.is_absolute() else (base_dir / folder).resolve()
+        if not folder.is_dir():
+            raise LegMapError(f"{where}: packages.{k} = {v!r}: {folder} is not a folder; give the folder of "
+                              f"package '{k}' (the one holding its package.xml)")
+        packages[k] = folder
+    if packages and kind != "urdf":
+        raise LegMapError(f"{where}: field 'packages' resolves a URDF's package:// URIs; this leg map names an MJCF")
     urdf = None
     if kind == "urdf":
         sites = [f for f, spec in [("imu", data["imu"])] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES
@@ -372,7 +392,7 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
                               "to a link, {body: <link>, pos: [x, y, z], rpy: [r, p, y]}")
         from legcal_bench.robots.urdf import mjcf_of_urdf
 
-        urdf, model = model, mjcf_of_urdf(model, where)
+        urdf, model = model, mjcf_of_urdf(model, where, packages)
     return LegMap(
         name=name,
         mjcf=model,
@@ -384,6 +404,7 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         held_joints_rad=held,
         servo_gains=gains,
         source=source,
+        packages=packages,
     )
 
 
