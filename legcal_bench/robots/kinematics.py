@@ -106,21 +106,23 @@ def _screw_terms(S: np.ndarray) -> tuple[float, bool, np.ndarray]:
 
 
 def _mjcf_model(path) -> pin.Model:
-    """Pinocchio's model of an MJCF. Pinocchio does not follow `<include>` (a scene file
-    that includes the robot and its sensors): such a file is read as MuJoCo's dm_control
-    reads it, includes resolved, full precision, and that text is given to Pinocchio."""
+    """Pinocchio's model of an MJCF. Pinocchio follows neither `<include>` (a scene file
+    that includes the robot and its sensors) nor `<frame>`: includes are read as MuJoCo's
+    dm_control reads them, full precision, frames folded by MuJoCo's compilation
+    (`legcal_bench.robots.frames`), and that text is given to Pinocchio."""
     from pathlib import Path
 
     from legcal_bench.files.scratch import scratch_dir
 
-    path = Path(path)
-    if "<include" not in path.read_text():
-        return pin.buildModelFromMJCF(str(path))
-    from dm_control import mjcf
+    from legcal_bench.robots.frames import has_frames, mjcf_element
 
+    path = Path(path)
+    text = path.read_text()
+    if "<include" not in text and not has_frames(text):
+        return pin.buildModelFromMJCF(str(path))
     with scratch_dir("kinematics") as folder:
         flat = Path(folder) / path.name
-        flat.write_text(mjcf.from_path(str(path)).to_xml_string())
+        flat.write_text(mjcf_element(path).to_xml_string())
         return pin.buildModelFromMJCF(str(flat))
 
 
@@ -133,7 +135,10 @@ class LegKinematics:
         self.legmap = legmap
         try:
             if legmap.urdf is not None:  # the URDF's root link as the floating base
-                self.model = pin.buildModelFromUrdf(str(legmap.urdf), pin.JointModelFreeFlyer())
+                from legcal_bench.robots.urdf import urdf_text
+
+                self.model = pin.buildModelFromXML(urdf_text(legmap.urdf, str(legmap.source or legmap.urdf)),
+                                                   pin.JointModelFreeFlyer())
             else:
                 self.model = _mjcf_model(legmap.mjcf)
         except Exception as e:  # noqa: BLE001 - Pinocchio raises bare RuntimeErrors

@@ -72,6 +72,7 @@ from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import ConfigError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
+from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 from legcal_bench.sim.names import EFFECT_GROUP, EFFECTS_HELP, KINDS
 from legcal_bench.sim.sensors import SimSensors
@@ -318,7 +319,7 @@ class ModelEdit:
         from dm_control import mjcf
 
         self.legmap, self.sensors, self.rng, self.spec = legmap, sensors, rng, spec
-        self.mjcf = mjcf.from_path(str(legmap.mjcf))
+        self.mjcf = mjcf_element(legmap.mjcf)
         self._kin = None
         self._live = None  # (MjModel, MjData, inverse pelvis pose) at the zero posture
 

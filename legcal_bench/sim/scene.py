@@ -21,6 +21,7 @@ from scipy.spatial.transform import Rotation
 
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
+from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -114,7 +115,7 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001, floor: dic
     """`floor`: the contact floor's parameters (`arena.floor_parameters`; default the table's)."""
     if mode not in MODES:
         raise ConfigError(f"mode {mode!r}: use one of {MODES}")
-    m = mjcf.from_path(str(legmap.mjcf))
+    m = mjcf_element(legmap.mjcf)
     m.option.timestep = physics_dt
     m.option.integrator = "implicitfast"
     return compose_robot(m, legmap, mode, floor)

@@ -47,6 +47,7 @@ import pinocchio as pin
 from dm_control import mjcf
 
 from legcal_bench.errors import ConfigError
+from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.sim.orientation import GravityFilter
@@ -129,7 +130,7 @@ def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
     if len(cfg.default_q) != legmap.n_joints:
         raise ConfigError(f"walking config: {len(cfg.default_q)} joint values (kp, kd, default_q) but robot "
                           f"{legmap.name} has {legmap.n_joints} leg joints")
-    m = mjcf.from_path(str(legmap.mjcf))
+    m = mjcf_element(legmap.mjcf)
     m.option.timestep = cfg.physics_dt
     if cfg.integrator is not None:
         m.option.integrator = cfg.integrator
