@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+from legcal_bench.errors import LegMapError
+
 FRAME = re.compile(r"<frame[\s/>]")  # the element, not <framepos> and the other frame sensors
 
 KINDS = ("site", "geom", "joint")
@@ -105,9 +107,12 @@ def mjcf_element(path):
     import mujoco
 
     if "<include" in text:
-        raise ValueError(f"{path} has both <include> and <frame> elements; fold the includes into one file "
-                         "(MuJoCo's compile-and-save does) and name that file")
-    folded = fold_frames(text, mujoco.MjModel.from_xml_path(str(path)))
+        raise LegMapError(f"{path} has both <include> and <frame> elements; fold the includes into one file "
+                          "and name that file")
+    try:
+        folded = fold_frames(text, mujoco.MjModel.from_xml_path(str(path)))
+    except ValueError as e:  # MuJoCo's compile error, or elements the folding could not match
+        raise LegMapError(f"{path}: its <frame> elements could not be folded: {e}") from None
     return mjcf.from_xml_string(folded, model_dir=str(path.parent))
 
 

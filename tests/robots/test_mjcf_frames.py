@@ -104,3 +104,16 @@ def test_the_framed_robot_collects_and_calibrates_through_its_leg_map(tmp_path):
     got = calibrate_training(get_calibrator("interfoot"), lm, recs).offsets_vector(lm.joint_names)
     truth = load_truth(list_segments(tmp_path / "kinematic")[0]).offsets
     assert np.rad2deg(np.abs(got - truth)).max() < 1e-9  # zero-noise kinematic data: exact
+
+
+def test_frames_beside_includes_are_refused_with_the_fix(tmp_path):
+    import pytest
+
+    from legcal_bench.errors import LegMapError
+    from legcal_bench.robots.frames import mjcf_element
+
+    xml, _ = _framed(tmp_path)
+    (tmp_path / "scene.xml").write_text(f'<mujoco><include file="{xml.name}"/><worldbody><frame pos="0 0 1">'
+                                        '<site name="s"/></frame></worldbody></mujoco>')
+    with pytest.raises(LegMapError, match="has both <include> and <frame> elements; fold the includes into one file"):
+        mjcf_element(tmp_path / "scene.xml")
