@@ -104,11 +104,14 @@ class LegDesign:
     # Roles the leg does not have ("ankle_roll": a leg of five joints whose foot hangs
     # from the ankle pitch, at the same place, with the ankle link's mass).
     absent_roles: tuple[str, ...] = ()
+    # The two ankle joints from shin to foot: pitch then roll (the built-ins), or roll
+    # then pitch (an ankle whose roll axis is the proximal one).
+    ankle_order: tuple[str, str] = ("ankle_pitch", "ankle_roll")
 
     @property
     def roles(self) -> tuple[str, ...]:
         """The leg's roles from pelvis to foot."""
-        return tuple(r for r in self.hip_order + ("knee", "ankle_pitch", "ankle_roll") if r not in self.absent_roles)
+        return tuple(r for r in self.hip_order + ("knee", *self.ankle_order) if r not in self.absent_roles)
 
     @property
     def foot_sole_offset(self) -> Vec3:
@@ -227,3 +230,6 @@ VARIATIONS: tuple[LegDesign, ...] = (
     replace(A3.scaled("kid_size", length=0.321, mass=0.055), flipped_axes=PITCH_ROLES),
     replace(A3, name="five_joint", absent_roles=("ankle_roll",)),
 )
+# Issue #59's generated test robot: the A3-like robot with its ankle roll before its
+# ankle pitch (the same chain slots: the roll axis where the pitch axis was).
+ROLL_FIRST_ANKLE = replace(A3, name="a3_roll_first_ankle", ankle_order=("ankle_roll", "ankle_pitch"))

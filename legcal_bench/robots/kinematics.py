@@ -158,6 +158,16 @@ class LegKinematics:
                 raise LegMapError(f"{legmap.source}: leg joint '{name}' is not a 1-DoF joint")
             self.leg_q_idx[i], self.leg_v_idx[i] = j.idx_q, j.idx_v
             self.leg_joint_ids[i] = m.getJointId(name)
+        for side in SIDES:  # listed from pelvis to foot: each joint moves the next
+            ids = [int(x) for x in self.leg_joint_ids[legmap.leg_slice(side)]]
+            order = sorted(ids, key=lambda j: len(m.supports[j]))
+            chain = [m.names[j] for j in order]
+            is_chain = all(a in m.supports[b] for a, b in zip(order, order[1:]))  # else: the check below names it
+            if is_chain and order != ids:
+                raise LegMapError(
+                    f"{legmap.source}: legs.{side}.joints are listed {[m.names[j] for j in ids]}, but the model's "
+                    f"chain from pelvis to foot is {chain}: list the leg's joints in chain order, each with its own "
+                    "role (the hip's three in any order, the ankle's two in either)")
         for name, angle in legmap.held_joints_rad.items():
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.model_file}")

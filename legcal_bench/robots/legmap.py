@@ -287,10 +287,14 @@ def _leg(ld, side: str, where: str, expected_roles: tuple[str, ...]) -> Leg:
             raise LegMapError(f"{jw}.role: {shown(role)} is not one of {list(LEG_ROLES)}")
         joints.append(Joint(_name(jd["name"], f"{jw}.name", "the joint's name in the model"), role))
     roles = [j.role for j in joints]
-    if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] != list(expected_roles[3:]):
+    ankles = [list(expected_roles[3:])]
+    if len(ankles[0]) == 3:  # the ankle's two joints in either order
+        ankles.append([ankles[0][0], ankles[0][2], ankles[0][1]])
+    if sorted(roles[:3]) != sorted(HIP_ROLES) or roles[3:] not in ankles:
         raise LegMapError(
             f"{lw}.joints: roles must be the three hip joints (any order), then "
-            f"{', '.join(expected_roles[3:])}, from pelvis to foot; got {roles}")
+            f"{', '.join(expected_roles[3:])}" + (" (the two ankle joints in either order)" if len(ankles) > 1 else "")
+            + f", from pelvis to foot; got {roles}")
     corners_d = ld["corners"]
     if not isinstance(corners_d, dict) or set(corners_d) != set(CORNER_NAMES):
         extra = sorted(map(str, set(corners_d) - set(CORNER_NAMES))) if isinstance(corners_d, dict) else []
@@ -344,6 +348,9 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
     if legs["left"].hip_order != legs["right"].hip_order:
         raise LegMapError(f"{where}: left and right legs have different hip orderings "
                           f"{legs['left'].hip_order} vs {legs['right'].hip_order}")
+    if [j.role for j in legs["left"].joints] != [j.role for j in legs["right"].joints]:
+        raise LegMapError(f"{where}: left and right legs have different ankle orders "
+                          f"{[j.role for j in legs['left'].joints][3:]} vs {[j.role for j in legs['right'].joints][3:]}")
     names = [j.name for s in SIDES for j in legs[s].joints]
     if len(set(names)) != len(names):
         raise LegMapError(f"{where}: the {len(names)} leg joint names must be distinct; got {names}")
