@@ -58,6 +58,12 @@ class HoldError(LegcalError):
         self.report = report
 
 
+class SimulationError(HoldError):
+    """The simulation itself failed (it diverged or shook: its state is not a robot
+    standing still), which no recording check should be left to find: the message names
+    the segment, what diverged and the body moving fastest, as a simulation fault."""
+
+
 class LogImportError(LegcalError):
     """A robot log or its mapping file that cannot be imported; the message names the
     mapping field (or the log, topic, column) and the fix."""

@@ -21,7 +21,7 @@ from tqdm import tqdm
 
 from legcal_bench import inputs
 from legcal_bench.data.recording import MANIFEST, Recording, Truth, is_session_dir, truth_path, write_manifest
-from legcal_bench.errors import ConfigError, HoldError, IKError
+from legcal_bench.errors import ConfigError, HoldError, IKError, SimulationError
 from legcal_bench.files.atomic import replace_dir
 from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.protocol.servos import servo_gains
@@ -291,6 +291,43 @@ def pushed_targets(kin, placement, postures: np.ndarray, q_init: np.ndarray, rat
                       "'push') or leave the stance out") from None
 
 
+G = 9.81
+# A robot standing in double support has an IMU specific force of about 1 g (its motion
+# adds a few per cent); a mean outside this band (in g) is a simulation shaking or
+# diverging, not a posture.
+STILL_G = (0.5, 2.0)
+
+
+def check_simulation(sim: DoubleSupportSim, name: str, stance: str, truth: dict) -> None:
+    """Raise SimulationError if the segment's simulation diverged (a state that is not
+    finite) or shook (the IMU's true specific force far from 1 g), naming the body moving
+    fastest at the segment's end and MuJoCo's own instability warning."""
+    if sim.mode == "kinematic":
+        return
+    f = np.linalg.norm(np.asarray(truth["imu_true_acc"], dtype=float), axis=1)
+    finite = all(np.isfinite(np.asarray(truth[k], dtype=float)).all()
+                 for k in ("q_true", "imu_true_acc", "pelvis_pose_world"))
+    if finite and STILL_G[0] * G <= f.mean() <= STILL_G[1] * G:
+        return
+    import mujoco
+
+    model, data = sim.scene.model, sim.data
+    speed = np.linalg.norm(data.cvel[:, 3:], axis=1)
+    body = int(np.argmax(np.where(np.isfinite(speed), speed, np.inf))) if len(speed) else 0
+    body_name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, body) or f"body {body}"
+    bad_acc = int(data.warning[mujoco.mjtWarning.mjWARN_BADQACC].number)
+    what = ("its state stopped being finite (NaN or infinite joint angles, pelvis pose or IMU)" if not finite else
+            f"the IMU's true specific force averaged {f.mean():.3g} m/s^2 (peak {f.max():.3g}; a robot standing "
+            f"still reads about {G:g})")
+    raise SimulationError(
+        f"segment {name}, stance {stance} ({sim.mode} mode): a simulation fault: the simulated robot did not stand "
+        f"still: {what}; at the segment's end body '{body_name}' moved fastest ({speed[body]:.3g} m/s)"
+        + (f"; MuJoCo reported unstable accelerations {bad_acc} time(s) (mjWARN_BADQACC)" if bad_acc else "")
+        + ". Likely cause: servo gains too stiff for the simulation's time step (servo_gains in the leg map), or "
+        "joints that move freely (joints the leg map neither lists nor holds: held_joints_rad); `legcal-bench info "
+        "--robot <leg map>` lists the gains and the held joints")
+
+
 def check_hold(sim: DoubleSupportSim, name: str, stance: str, truth: dict, gains_note: str = "",
                label: str | None = None) -> HoldReport:
     """The hold check of one recorded segment; raises HoldError naming the stance, what
@@ -401,6 +438,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
             bar.set_postfix_str(name)
             obs, tr, stance_scale, motion_scale = record_segment(sim, stance, duration, seed, jm, jr, bar,
                                                                  cfg.period_scale, catalog, kind == "stance")
+            check_simulation(sim, name, stance, tr)
             hold = check_hold(sim, name, stance, tr, gains.note if gains else "", catalog[stance].label)
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
