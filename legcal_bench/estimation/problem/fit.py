@@ -169,20 +169,6 @@ class FrameResiduals:
     q_enc: np.ndarray
     time_index: np.ndarray
 
-    def stacked(self, sf: np.ndarray, sg: np.ndarray, columns) -> tuple[np.ndarray, np.ndarray]:
-        """(r, J) over the first `columns` columns (or those indices), the rows weighted
-        (`sf` the six inter-foot rows', `sg` the five flat-ground rows') and stacked as a
-        `StanceProblem` over the same segments stacks them: per segment its inter-foot
-        rows, then its flat-ground rows."""
-        cols = np.arange(columns) if np.isscalar(columns) else np.asarray(columns)
-        r, J = [], []
-        for i in np.unique(self.segment):
-            m = self.segment == i
-            for rows, w in ((slice(0, 6), sf), (slice(6, 11), sg)):
-                r.append((self.r[m, rows] * w).ravel())
-                J.append((self.J[m, rows][:, :, cols] * w[:, None]).reshape(-1, len(cols)))
-        return np.concatenate(r), np.vstack(J)
-
     @property
     def G(self) -> np.ndarray:
         return self.J_fixed[:, :, :self.model.n_offsets]
