@@ -71,6 +71,7 @@ or not finite is refused at `step` the same way.
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -84,6 +85,7 @@ from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.collect import CollectConfig, standing_controller
 from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, posture_bounds, settled_placement
 from legcal_bench.robots import load_robot
+from legcal_bench.robots.holds import joint_holds
 from legcal_bench.robots.legmap import LegMap
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.offsets import resolve_offsets
@@ -201,8 +203,13 @@ class StaticDoubleSupportEnv(MujocoEnv):
         """The injected offsets (ground truth)."""
         return self.sim.offsets.copy()
 
+    @cached_property
+    def _held_joints(self) -> list[dict]:
+        """Every non-leg joint: held at what, how (`legcal_bench.robots.holds`)."""
+        return [h.to_dict() for h in joint_holds(self.sim.sim_legmap)]
+
     def _info(self) -> dict:
-        return {**self.sim.truth(), "stance": self.placement.stance.name,
+        return {**self.sim.truth(), "stance": self.placement.stance.name, "held_joints": self._held_joints,
                 "log_det_information": self._information.logdet if self._information is not None else None}
 
     def _render_scene(self):

@@ -53,7 +53,11 @@ from typing import Any
 # 11 = the standing controller also holds the centre of mass at the plan's while each
 #     stance settles, and its authority per joint is 10 deg instead of 5 (issue #38):
 #     every contact-mode set recorded with it changes again.
-RESULTS_VERSION = 11
+# 12 = every joint the leg map does not list is held (issue #59), rigidly with its own
+#     actuators switched off, or on a servo with the leg map's gains: sets of robots with
+#     such joints change (the whole-body G1's: its held arms and waist no longer pulled
+#     toward 0 by their position actuators); the built-ins' and the 12-joint G1's do not.
+RESULTS_VERSION = 12
 PACKAGE = "legcal-bench"
 
 

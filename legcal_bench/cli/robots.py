@@ -66,6 +66,7 @@ def cmd_info(a: argparse.Namespace) -> int:
     from legcal_bench.protocol.servos import servo_gains
     from legcal_bench.robots import BUILTIN, load_robot
     from legcal_bench.robots.design import ROLE_AXIS_NAME
+    from legcal_bench.robots.holds import joint_holds
     from legcal_bench.robots.kinematics import LegKinematics, axis_warnings
 
     if a.robot is None:
@@ -80,7 +81,8 @@ def cmd_info(a: argparse.Namespace) -> int:
         "hip_order": "->".join(r.replace("hip_", "") for r in legmap.hip_order),
         "leg_joints": legmap.leg_joints, "absent_roles": list(legmap.absent_roles),
         "dims_m": asdict(kin.dims), "knee_straight_deg": float(np.rad2deg(legmap.knee_straight_rad)),
-        "held_joints_deg": {k: float(np.rad2deg(v)) for k, v in legmap.held_joints_rad.items()},
+        # every non-leg joint: held at what (from the leg map, a keyframe or the model), how (rigid or servo)
+        "held_joints": [h.to_dict() for h in joint_holds(legmap)],
         "joints": [],
     }
     axes = kin.joint_axes()
@@ -118,8 +120,12 @@ def cmd_info(a: argparse.Namespace) -> int:
     print(f"  servo gains for static collection: {gains.note}")
     for w in info["axis_warnings"]:
         print(f"  warning: {w}")
-    if info["held_joints_deg"]:
-        print("  held joints (deg): " + ", ".join(f"{k} {v:+.2f}" for k, v in info["held_joints_deg"].items()))
+    if info["held_joints"]:
+        print(f"  held joints in static collection (every joint the legs do not list; {len(info['held_joints'])}):")
+        for h in info["held_joints"]:
+            how = (f"servo kp {h['kp']:g}, kd {h['kd']:g} (servo_gains)" if h["how"] == "servo" else
+                   "rigid (joint equality)" if h["how"] == "rigid" else "free (a ball joint: not held)")
+            print(f"     {h['joint']:<28} {h['angle_deg']:+8.3f} deg  from {h['from']:<28} {how}")
     return 0
 
 

@@ -36,7 +36,7 @@ from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.effects import Reality, build_reality, floor_stances
-from legcal_bench.sim.hold import HoldReport
+from legcal_bench.sim.hold import RIGID_HOLD_LIMIT_RAD, HoldReport, held_joints_table
 from legcal_bench.sim.offsets import paper_note, resolve_offsets
 from legcal_bench.sim.scene import MODES
 from legcal_bench.sim.sensors import sim_sensors
@@ -199,6 +199,9 @@ class CollectSummary:
     # (`legcal_bench.sim.offsets.paper_note`), default stances its legs cannot stand in
     # (`legcal_bench.protocol.stances.stances_for`).
     notes: list[str] = field(default_factory=list)
+    # Every held non-leg joint: at what, how, its largest departure over the segments
+    # (`legcal_bench.sim.hold.held_joints_table`; weld and contact modes).
+    held_joints: list[dict] = field(default_factory=list)
 
 
 def _segments(cfg: CollectConfig, rng: np.random.Generator, catalog: dict, stances: tuple[str, ...]):
@@ -324,7 +327,8 @@ def check_simulation(sim: DoubleSupportSim, name: str, stance: str, truth: dict)
         f"still: {what}; at the segment's end body '{body_name}' moved fastest ({speed[body]:.3g} m/s)"
         + (f"; MuJoCo reported unstable accelerations {bad_acc} time(s) (mjWARN_BADQACC)" if bad_acc else "")
         + ". Likely cause: servo gains too stiff for the simulation's time step (servo_gains in the leg map), or "
-        "joints that move freely (joints the leg map neither lists nor holds: held_joints_rad); `legcal-bench info "
+        "a held joint's servo too soft or too stiff for it (servo_gains naming a held joint), or a ball joint nothing "
+        "holds; `legcal-bench info "
         "--robot <leg map>` lists the gains and the held joints")
 
 
@@ -431,6 +435,8 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     session = session_id(cfg, sim.offsets, legmap.name)
     t0 = time.perf_counter()
 
+    held_error = np.zeros(len(sim.scene.holds) if sim.scene is not None else 0)
+
     def write(folder: Path) -> None:
         files = []
         bar = tqdm(total=total, desc=f"collect {legmap.name} ({cfg.mode})", unit="frame", disable=not progress)
@@ -440,6 +446,8 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                                                                  cfg.period_scale, catalog, kind == "stance")
             check_simulation(sim, name, stance, tr)
             hold = check_hold(sim, name, stance, tr, gains.note if gains else "", catalog[stance].label)
+            if "held_joint_error_rad" in tr:
+                np.maximum(held_error, np.abs(tr["held_joint_error_rad"]).max(axis=0, initial=0.0), out=held_error)
             rec = Recording(
                 name=name, kind=kind, stance=stance, robot=legmap.name, joint_names=legmap.joint_names,
                 time=tr["time"], q_enc=obs["q_enc"], imu_acc=obs["imu_acc"], imu_gyro=obs["imu_gyro"],
@@ -468,10 +476,19 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 unreachable=int((~tr["posture_reachable"]).sum()), stance_scale=stance_scale,
                 motion_scale=motion_scale, hold=hold.to_dict()))
         bar.close()
+        if sim.scene is not None:
+            summary.held_joints = held_joints_table(sim.scene.holds, held_error)
+            loose = [h for h in summary.held_joints if h["how"] == "rigid" and not h["within_limit"]]
+            if loose:
+                summary.notes.append(
+                    f"{len(loose)} rigidly held joint(s) moved more than {np.rad2deg(RIGID_HOLD_LIMIT_RAD):g} deg from "
+                    "their hold angle: " + ", ".join(f"{h['joint']} {h['error_deg']:.3f} deg" for h in loose)
+                    + " (the hold's equality yields under the joint's load; the calibration is unaffected, the "
+                    "robot's mass distribution is not the model's)")
         write_manifest(folder, {"robot": legmap.name, "session": session, "mode": cfg.mode, "seed": cfg.seed,
                                 "sensor_model": sim.sensor.model.to_dict(), "files": files, "config": asdict(cfg),
                                 "results_version": RESULTS_VERSION,
-                                "servo_gains": summary.servo_gains,
+                                "servo_gains": summary.servo_gains, "held_joints": summary.held_joints,
                                 "stances": {g.name: {"stance": g.stance, "stance_scale": g.stance_scale,
                                                      "motion_scale": g.motion_scale, "hold": g.hold}
                                             for g in summary.segments}})
@@ -497,6 +514,16 @@ def format_summary(s: CollectSummary) -> str:
             f"{n.replace('_joint', '')} {kp:.0f} ({src})"
             for n, kp, src in zip(s.joint_names[:len(s.joint_names) // 2], g["kp"], g["source"]))  # left leg first
             + f" (left leg; {g['note']})")
+    if s.held_joints:
+        rigid = [h for h in s.held_joints if h["how"] == "rigid"]
+        servo = [h for h in s.held_joints if h["how"] == "servo"]
+        free = [h["joint"] for h in s.held_joints if h["how"] == "free"]
+        worst = max(rigid, key=lambda h: h["error_deg"], default=None)
+        lines.append("held joints (not in the leg map's legs): " + "; ".join(filter(None, [
+            f"{len(rigid)} rigid (largest departure {worst['error_deg']:.4f} deg, {worst['joint']})" if rigid else "",
+            (f"{len(servo)} on servos (sag, deg: "
+             + ", ".join(f"{h['joint']} {h['sag_deg']:.3f}" for h in servo) + ")") if servo else "",
+            f"free (ball joints): {', '.join(free)}" if free else ""])))
     lines.append(f"{'segment':<12} {'kind':<9} {'stance':<9} {'frames':>6} {'max|gyro|':>10} {'sole drift':>18} "
                  f"{'pelvis':>8} {'fit':>5} {'motion':>6} {f'joint range (deg, min..max over {len(s.joint_names)})':>36}")
     for g in s.segments:

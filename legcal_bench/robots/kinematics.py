@@ -38,6 +38,7 @@ from scipy.optimize import least_squares
 from legcal_bench.errors import IKError, LegMapError
 from legcal_bench.geometry.lie import Exp, Jr_inv, Log, adjoint, inverse
 from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose, posture_poses
+from legcal_bench.robots.holds import hold_angles
 from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS, ROLE_AXIS_NAME
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 
@@ -168,10 +169,12 @@ class LegKinematics:
                     f"{legmap.source}: legs.{side}.joints are listed {[m.names[j] for j in ids]}, but the model's "
                     f"chain from pelvis to foot is {chain}: list the leg's joints in chain order, each with its own "
                     "role (the hip's three in any order, the ankle's two in either)")
-        for name, angle in legmap.held_joints_rad.items():
+        for name, angle in hold_angles(legmap).items():  # every other joint where the simulator holds it
             if not m.existJointName(name):
                 raise LegMapError(f"{legmap.source}: held joint '{name}' is not in {legmap.model_file}")
-            self.q_neutral[m.joints[m.getJointId(name)].idx_q] = angle
+            j = m.joints[m.getJointId(name)]
+            if j.nq == 1:
+                self.q_neutral[j.idx_q] = angle
         self.pelvis_frame = self._frame_id(legmap.pelvis, "body", "pelvis")
         self.sole_frame = {s: self._add_frame(f"legcal_{s}_sole", legmap.legs[s].sole, f"legs.{s}.sole")
                            for s in SIDES}

@@ -364,11 +364,12 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         if k in names:
             raise LegMapError(f"{where}: held_joints_rad.{k} is a leg joint; only non-leg joints are held")
         held[k] = _number(v, f"{where}: held_joints_rad.{k}", "the angle in radians at which the joint is held")
-    gains_d = _optional_mapping(data, "servo_gains", where, "leg joint names to [kp, kd]")
+    # Leg joints by name; the held (non-leg) joints by name or pattern, checked against the
+    # model's joints when they are held (`legcal_bench.robots.holds`).
+    gains_d = _optional_mapping(data, "servo_gains", where, "joint names (or patterns of held joints) to [kp, kd]")
     gains = {}
     for k, v in gains_d.items():
-        if k not in names:
-            raise LegMapError(f"{where}: servo_gains.{k} is not one of the leg joints")
+        _name(k, f"{where}: servo_gains key", "a joint's name, or a pattern such as '*_wrist_*' for held joints")
         kp, kd = _vec(v, f"{where}: servo_gains.{k} ([kp, kd])", 2)
         if kp <= 0 or kd < 0:
             raise LegMapError(f"{where}: servo_gains.{k} = {shown(v)}: kp must be > 0 (N m/rad) and kd >= 0 "

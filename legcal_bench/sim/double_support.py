@@ -355,8 +355,7 @@ class DoubleSupportSim:
         a = sc.free_qpos_adr
         d.qpos[a:a + 7] = se3_to_pos_quat(T_WB)
         d.qpos[sc.qpos_adr] = q_true
-        for name, angle in self.sim_legmap.held_joints_rad.items():
-            d.qpos[sc.model.jnt_qposadr[mujoco.mj_name2id(sc.model, mujoco.mjtObj.mjOBJ_JOINT, name)]] = angle
+        d.qpos[sc.hold_qpos_adr] = sc.hold_angle
 
     def _planned_com(self) -> tuple[float, float]:
         """Where the plan puts the centre of mass on the floor (world x, y): the robot's
@@ -472,7 +471,8 @@ class DoubleSupportSim:
                "imu_true_gyro": np.empty((n, 3))}
         if self.mode != "kinematic":
             buf.update(sole_pos=np.empty((n, 2, 3)), sole_rot=np.empty((n, 2, 9)),
-                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, nj)))
+                       pelvis_pos=np.empty((n, 3)), pelvis_rot=np.empty((n, 9)), q_target=np.empty((n, nj)),
+                       held_q=np.empty((n, len(self.scene.holds))))
         if self.has_ft:
             buf["ft"] = np.empty((n, 2, 6))  # the ankle sensors' true wrenches
         return buf
@@ -492,6 +492,7 @@ class DoubleSupportSim:
             buf["pelvis_rot"][i] = d.xmat[b]
             # What the servos are told: the planned target and the standing controller's corrections.
             buf["q_target"][i] = self._target if self.regulator is None else self._target + self.regulator.u
+            buf["held_q"][i] = d.qpos[self.scene.hold_qpos_adr]
         if self.has_ft:
             buf["ft"][i] = self.data.sensordata[self._ft_adr]
 
@@ -531,6 +532,8 @@ class DoubleSupportSim:
             "sole_turn_rad": np.abs(rotation[..., 2]),  # of that, about the sole's normal (a twist on the floor)
             "imu_true_acc": buf["imu_true_acc"],
             "imu_true_gyro": buf["imu_true_gyro"],
+            # (N, h) each held non-leg joint's angle minus its hold angle (`Scene.holds`; physics modes)
+            **({"held_joint_error_rad": buf["held_q"] - self.scene.hold_angle} if "held_q" in buf else {}),
             **dict(zip(("pelvis_hold_error_m", "pelvis_strain_m", "pelvis_beyond_strain_m"),
                        self._pelvis_hold_error(buf, soles, pelvis))),
         }

@@ -73,11 +73,12 @@ from scipy.spatial.transform import Rotation
 from legcal_bench.errors import ConfigError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.frames import mjcf_element
+from legcal_bench.robots.holds import OWN_PREFIX, hold_angles
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
 from legcal_bench.sim.names import EFFECT_GROUP, EFFECTS_HELP, KINDS
 from legcal_bench.sim.sensors import SimSensors
 
-COMPLIANCE_PREFIX = "legcal_compliance_"  # a passive series hinge after the motor joint it names
+COMPLIANCE_PREFIX = OWN_PREFIX + "compliance_"  # a passive series hinge after the motor joint it names (not held)
 COMPLIANCE_DAMPING_RATIO = 0.7  # of the spring against the motor's armature
 MIN_ARMATURE = 0.01  # kg m^2, given to a motor joint without one (a rotor always has some)
 LINKS = ("thigh", "shank")
@@ -473,7 +474,7 @@ class ModelEdit:
             model = mujoco.MjModel.from_xml_string(self.mjcf.to_xml_string(), self.mjcf.get_assets())
             data = mujoco.MjData(model)
             data.qpos[:] = model.qpos0
-            for name, angle in [(n, 0.0) for n in self.legmap.joint_names] + list(self.legmap.held_joints_rad.items()):
+            for name, angle in [(n, 0.0) for n in self.legmap.joint_names] + list(hold_angles(self.legmap).items()):
                 data.qpos[model.jnt_qposadr[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)]] = angle
             mujoco.mj_kinematics(model, data)
             pelvis = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, self.legmap.pelvis)

@@ -47,6 +47,26 @@ class HoldLimits:
 HOLD_LIMITS = HoldLimits()
 STRAIN_SHOWN_M = 5e-4  # a smaller strain is left out of the pelvis's failure message
 FALL_MOVE_M, FALL_TILT_RAD = 0.05, float(np.deg2rad(30.0))  # beyond either, a sole fell with the robot
+# A rigidly held non-leg joint (`legcal_bench.robots.holds`) departs from its hold angle
+# by less than this in a segment (the equality's stiffness against the joint's load); a
+# servo hold's departure is its sag, reported, not limited.
+RIGID_HOLD_LIMIT_RAD = float(np.deg2rad(0.1))
+
+
+def held_joints_table(holds, max_error_rad: np.ndarray) -> list[dict]:
+    """Each held non-leg joint (`JointHold`s, as simulated) with its largest departure
+    from its hold angle over the recorded segments (`max_error_rad`, (h,)): the
+    `sag_deg` of a servo hold, the `error_deg` of a rigid one (`within_limit` says
+    whether it stayed inside RIGID_HOLD_LIMIT_RAD)."""
+    out = []
+    for h, e in zip(holds, np.asarray(max_error_rad, dtype=float)):
+        d = h.to_dict()
+        if h.how == "servo":
+            d["sag_deg"] = float(np.rad2deg(e))
+        else:
+            d.update(error_deg=float(np.rad2deg(e)), within_limit=bool(e <= RIGID_HOLD_LIMIT_RAD))
+        out.append(d)
+    return out
 
 
 @dataclass(frozen=True)

@@ -10,7 +10,7 @@ untouched, so Pinocchio (which loads the plain robot file) sees the same robot.
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.frames import mjcf_element
+from legcal_bench.robots.holds import JointHold, joint_holds
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -70,6 +71,9 @@ class Scene:
     servo_kd: np.ndarray
     servo_source: tuple[str, ...] = ()  # per leg joint: "MJCF", "leg map", "default" or "none"
     servo: tuple = ()  # (position ctrl index, target columns or None, motor PD arrays or None)
+    holds: tuple = ()  # the held non-leg joints (`legcal_bench.robots.holds.JointHold`), as simulated
+    hold_qpos_adr: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (h,) their qpos addresses
+    hold_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (h,) what each is held at
 
     def __post_init__(self):
         self._layout()
@@ -118,15 +122,17 @@ def build_scene(legmap: LegMap, mode: str, physics_dt: float = 0.001, floor: dic
     m = mjcf_element(legmap.mjcf)
     m.option.timestep = physics_dt
     m.option.integrator = "implicitfast"
-    return compose_robot(m, legmap, mode, floor)
+    return compose_robot(m, legmap, mode, floor, holds=joint_holds(legmap))
 
 
 def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | None = None,
-                  release: set | frozenset = frozenset()) -> Scene:
+                  release: set | frozenset = frozenset(), holds: tuple[JointHold, ...] | None = None) -> Scene:
     """The scene around robot model `m` (its options already set): the arena's floor
     (`mode` "walking": colliding, with `floor`'s contact parameters), the leg map's
-    frames and sensors, held joints (except those in `release`: a whole-body policy
-    drives them), weld anchors; compiled and indexed."""
+    frames and sensors, held joints (`holds`, default the leg map's `held_joints_rad`;
+    except those in `release`: a whole-body policy drives them), weld anchors; compiled
+    and indexed. In the static modes a held joint's own actuators are switched off (the
+    hold replaces them); walking keeps them."""
     where = str(legmap.source or legmap.name)
     m.option.gravity = (0, 0, -9.81)
     vis_global = getattr(m.visual, "global")
@@ -160,12 +166,17 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
             ft = _add_site(m, f"legcal_{side}_ft", legmap.legs[side].ft, f"{where}: legs.{side}.ft")
             m.sensor.add("force", name=f"legcal_{side}_force", site=ft)
             m.sensor.add("torque", name=f"legcal_{side}_torque", site=ft)
-    for name, angle in legmap.held_joints_rad.items():
-        _find(m, "joint", name, f"{where}: held_joints_rad")
-        if name in release:
-            continue
-        m.equality.add("joint", name=f"legcal_hold_{name}", joint1=name, polycoef=[angle, 0, 0, 0, 0],
-                       solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
+    if holds is None:  # walking: the leg map's held joints, rigidly (a policy's spec drives or holds the rest)
+        holds = tuple(JointHold(n, a, "leg map", "rigid") for n, a in legmap.held_joints_rad.items())
+    holds = tuple(h for h in holds if h.joint not in release and h.how != "free")
+    for h in holds:
+        _find(m, "joint", h.joint, f"{where}: held joint")
+        if h.how == "rigid":
+            m.equality.add("joint", name=f"legcal_hold_{h.joint}", joint1=h.joint, polycoef=[h.angle_rad, 0, 0, 0, 0],
+                           solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
+        else:  # a PD servo toward the angle, no ctrl: force = kp (angle - q) - kd qdot
+            m.actuator.add("general", name=f"legcal_servo_{h.joint}", joint=h.joint, gainprm=[0.0],
+                           biastype="affine", biasprm=[h.kp * h.angle_rad, -h.kp, -h.kd], ctrllimited=False)
     if mode == "weld":
         for side in SIDES:
             anchor = m.worldbody.add("body", name=f"legcal_{side}_anchor", mocap=True)
@@ -175,6 +186,7 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
 
     model = mujoco.MjModel.from_xml_string(m.to_xml_string(), m.get_assets())
     scene = _index(model, legmap, mode, free.full_identifier, sole_site, corner_sites, imu_site, has_ft, where)
+    _index_holds(scene, holds, mute=mode != "walking")
     if mode != "walking":  # the leg map's (static) gains into the model; walking servos keep theirs
         set_servo_gains(scene, scene.servo_kp, scene.servo_kd, scene.servo_source)
     return scene
@@ -246,6 +258,22 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
         servo_source=tuple(source),
     )
+
+
+def _index_holds(scene: Scene, holds: tuple[JointHold, ...], mute: bool) -> None:
+    """Record the holds and their joints' addresses; with `mute`, switch off the model's
+    own actuators on held joints (gain and bias 0: they would pull the joint elsewhere)."""
+    m = scene.model
+    ids = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, h.joint) for h in holds]
+    scene.holds, scene.hold_qpos_adr = holds, np.array([m.jnt_qposadr[j] for j in ids], dtype=int)
+    scene.hold_angle = np.array([h.angle_rad for h in holds], dtype=float)
+    if not mute or not ids:
+        return
+    for a in range(m.nu):
+        name = mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_ACTUATOR, a) or ""
+        if (m.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and int(m.actuator_trnid[a, 0]) in ids
+                and not name.startswith("legcal_servo_")):
+            m.actuator_gainprm[a, :], m.actuator_biasprm[a, :] = 0.0, 0.0
 
 
 def set_servo_gains(scene: Scene, kp: np.ndarray, kd: np.ndarray, source: tuple[str, ...]) -> None:

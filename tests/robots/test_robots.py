@@ -60,7 +60,6 @@ def a3_dict():
     (lambda d: d["legs"]["left"]["joints"].append({"name": "toe", "role": "knee"}), "7 joints listed"),
     (lambda d: d["legs"]["left"].update(joints="all of them"), "list the leg's joints from pelvis to foot"),
     (lambda d: d["legs"]["left"]["corners"].pop("toe_left"), "legs.left.corners"),
-    (lambda d: d.update(servo_gains={"waist": [1, 2]}), "servo_gains.waist"),
     (lambda d: d["legs"]["right"].update(sole={"site": "x", "body": "y"}), "exactly one of 'site"),
     (lambda d: d.update(schema="v0"), "field 'schema'"),
 ])

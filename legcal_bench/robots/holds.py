@@ -1,0 +1,164 @@
+"""Every joint of the model that the leg map does not list: held, at what angle, how.
+
+A static calibration posture is the legs'; every other joint of the robot (a waist, the
+arms, a head, the fingers of a vendor's URDF) is held still while the legs move, as a
+robot team holds them on the real robot. For each hinge or slide joint of the model
+that is not a leg joint (the pelvis's free joint aside) this module says
+
+  at what  the leg map's `held_joints_rad` angle, else the model's first keyframe's
+           (`<keyframe><key qpos=...>`: a vendor's standing pose), else the model's
+           reference angle (`qpos0`: 0 unless the joint gives `ref`);
+  how      `rigid`: a stiff joint equality (the simulator's hold for such joints since
+           the first release; its own actuators switched off, or they would pull it
+           elsewhere), or `servo`: a PD servo toward the angle with the leg map's
+           `servo_gains` for that joint (a name, or a pattern such as `"*_wrist_*"`),
+           under which the joint sags by what gravity asks of those gains (measured
+           per segment and reported by the collector).
+
+Joints named `legcal_...` are legcal-bench's own (a reality effect's series spring,
+`legcal_bench.sim.effects`): they belong to the effect and are not held. Ball joints cannot be held by a joint equality; they are listed as `free`. The table
+comes from MuJoCo's own reading of the robot file (`mujoco.MjSpec`, includes and frames
+resolved; meshes left out, so that it compiles in milliseconds), kept per file.
+"""
+
+from __future__ import annotations
+
+import fnmatch
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from legcal_bench.errors import LegMapError
+from legcal_bench.robots.legmap import LegMap
+
+HOWS = ("rigid", "servo", "free")
+OWN_PREFIX = "legcal_"  # joints legcal-bench adds to a model (a series spring): the effect's, not held
+PATTERN_CHARS = "*?["
+
+
+@dataclass(frozen=True)
+class JointHold:
+    """One non-leg joint's hold."""
+
+    joint: str
+    angle_rad: float
+    source: str  # "leg map", "keyframe '<name>'", "model's reference (qpos0)"
+    how: str  # one of HOWS
+    kp: float | None = None  # servo holds: N m/rad (or N/m for a slide joint)
+    kd: float | None = None
+
+    def to_dict(self) -> dict:
+        d = {"joint": self.joint, "angle_deg": float(np.rad2deg(self.angle_rad)), "from": self.source,
+             "how": self.how}
+        if self.how == "servo":
+            d.update(kp=self.kp, kd=self.kd)
+        return d
+
+
+@dataclass(frozen=True)
+class ModelJoint:
+    name: str
+    kind: str  # "hinge", "slide", "ball", "free"
+    qpos0: float  # hinge and slide joints: the reference; others 0
+    keyframe: float | None  # the first keyframe's value, None without keyframes
+
+
+def is_pattern(key: str) -> bool:
+    return any(c in key for c in PATTERN_CHARS)
+
+
+@lru_cache(maxsize=32)
+def _model_joints(path: str, _stamp: tuple[int, int]) -> tuple[tuple[ModelJoint, ...], str | None]:
+    import mujoco
+
+    try:
+        spec = mujoco.MjSpec.from_file(path)
+        for geom in spec.geoms:  # the table needs no meshes: the compile takes ms, not seconds
+            if geom.type == mujoco.mjtGeom.mjGEOM_MESH:
+                geom.type, geom.meshname = mujoco.mjtGeom.mjGEOM_SPHERE, ""
+                geom.size = [0.01, 0.0, 0.0]
+        for mesh in list(spec.meshes):
+            spec.delete(mesh)
+        model = spec.compile()
+    except Exception as e:  # MuJoCo's own words; the scene's compile says the same with the fix
+        raise LegMapError(f"{path}: MuJoCo could not read the robot's joints: {e}") from e
+    kinds = {0: "free", 1: "ball", 2: "slide", 3: "hinge"}
+    key_name = (mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_KEY, 0) or "0") if model.nkey else None
+    out = []
+    for j in range(model.njnt):
+        adr, kind = int(model.jnt_qposadr[j]), kinds[int(model.jnt_type[j])]
+        scalar = kind in ("hinge", "slide")
+        out.append(ModelJoint(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}", kind,
+                              float(model.qpos0[adr]) if scalar else 0.0,
+                              float(model.key_qpos[0, adr]) if scalar and model.nkey else None))
+    return tuple(out), key_name
+
+
+def model_joints(mjcf: Path) -> tuple[tuple[ModelJoint, ...], str | None]:
+    """(every joint of the robot file, in MuJoCo's order; the first keyframe's name or None)."""
+    p = Path(mjcf).resolve()
+    st = p.stat()
+    return _model_joints(str(p), (st.st_mtime_ns, st.st_size))
+
+
+def joint_holds(legmap: LegMap) -> tuple[JointHold, ...]:
+    """The hold of every non-leg joint of `legmap`'s robot, in the model's order.
+    Raises LegMapError for a `held_joints_rad` or `servo_gains` entry that names no
+    joint of the model, or a pattern that matches none."""
+    joints, key_name = model_joints(legmap.mjcf)
+    where = str(legmap.source or legmap.name)
+    names = {j.name for j in joints}
+    legs = set(legmap.joint_names)
+    for name in legmap.held_joints_rad:
+        if name not in names:
+            raise LegMapError(f"{where}: held_joints_rad.{name}: no joint of that name in {legmap.model_file}; "
+                              f"its non-leg joints are {_listing(joints, legs)}")
+    held = [j for j in joints if j.kind != "free" and j.name not in legs and not j.name.startswith(OWN_PREFIX)]
+    for key in legmap.servo_gains:
+        if key in legs:
+            continue
+        if is_pattern(key):
+            if not any(fnmatch.fnmatchcase(j.name, key) for j in held):
+                raise LegMapError(f"{where}: servo_gains.{key!r} matches no non-leg joint of {legmap.model_file} "
+                                  f"(they are {_listing(joints, legs)}); fix the pattern or remove it")
+        elif key not in names:
+            raise LegMapError(f"{where}: servo_gains.{key}: no joint of that name in {legmap.model_file}; give a "
+                              f"leg joint or one of its non-leg joints ({_listing(joints, legs)}), or a pattern")
+    out = []
+    for j in held:
+        if j.name in legmap.held_joints_rad:
+            angle, source = legmap.held_joints_rad[j.name], "leg map"
+        elif j.keyframe is not None:
+            angle, source = j.keyframe, f"keyframe '{key_name}'"
+        else:
+            angle, source = j.qpos0, "model's reference (qpos0)"
+        if j.kind == "ball":
+            out.append(JointHold(j.name, 0.0, "model", "free"))
+            continue
+        gains = servo_gains_of(legmap, j.name)
+        out.append(JointHold(j.name, float(angle), source, "servo", *gains) if gains is not None
+                   else JointHold(j.name, float(angle), source, "rigid"))
+    return tuple(out)
+
+
+def servo_gains_of(legmap: LegMap, joint: str) -> tuple[float, float] | None:
+    """The leg map's servo gains for a non-leg joint: by its name, else by the first
+    pattern (in the leg map's order) that matches it; None for a rigid hold."""
+    if joint in legmap.servo_gains:
+        return legmap.servo_gains[joint]
+    for key, gains in legmap.servo_gains.items():
+        if is_pattern(key) and fnmatch.fnmatchcase(joint, key):
+            return gains
+    return None
+
+
+def hold_angles(legmap: LegMap) -> dict[str, float]:
+    """Joint name -> the angle it is held at (rigid and servo holds)."""
+    return {h.joint: h.angle_rad for h in joint_holds(legmap) if h.how != "free"}
+
+
+def _listing(joints, legs) -> str:
+    names = [j.name for j in joints if j.kind != "free" and j.name not in legs]
+    return ", ".join(names[:12]) + (f" and {len(names) - 12} more" if len(names) > 12 else "") if names else "none"
