@@ -60,6 +60,18 @@ def cmd_verdicts(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_imu_mount(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seeds=inputs.seed, workers=inputs.count)
+    from legcal_bench.reports.imu_mount import RATIO_BAR, measure
+
+    d = measure(a.out, a.robots, a.seeds, workers=a.workers, progress=not a.quiet)
+    print(f"wrote {a.out}/imu_mount.md, .json ({len(d['rows'])} cases)")
+    for robot, s in d["summary"].items():
+        print(f"  {robot}: torso / pelvis {s['torso_over_pelvis']:.2f}x (bar {RATIO_BAR:g}x: "
+              f"{'met' if s['met'] else 'missed'}); undeclared all do-not-apply: {s['undeclared_all_do_not_apply']}")
+    return 0
+
+
 def cmd_robots_check(a: argparse.Namespace) -> int:
     door(a, out=inputs.output_folder, seeds=RUN_COUNT)
     from legcal_bench.reports.robots_check import run_robots_check
@@ -304,6 +316,26 @@ def add_commands(sub) -> None:
     _out(vp, "verdicts", "reports/verdicts", "verdicts.md, verdicts.json and cases/")
     _quiet(vp)
     vp.set_defaults(func=cmd_verdicts)
+
+    from legcal_bench.reports import imu_mount as im
+
+    ip = sub.add_parser("imu-mount", help="a torso IMU declared through its waist against its pelvis-IMU twin; "
+                                          "writes imu_mount.md/.json",
+                        description="For each robot, three twins differing only in the IMU: on the pelvis, in the "
+                                    "torso declared through the waist (imu.through), in the torso undeclared. Each "
+                                    "seed collects a realistic weld set per twin, calibrates it with interfoot and "
+                                    "scores it: the torso twin's IMU-removed recovery against the pelvis twin's "
+                                    f"(bar: within {im.RATIO_BAR:g}x) and the verdicts (undeclared: do-not-apply). "
+                                    "Each case is kept under --out/cases as it finishes: a stopped run resumes.")
+    ip.add_argument("--robots", nargs="+", default=list(im.ROBOTS), choices=list(im.ROBOTS),
+                    help=f"robots (default {' '.join(im.ROBOTS)}: the generated A3-like robot with a 3-joint waist, "
+                         "the whole-body G1)")
+    ip.add_argument("--seeds", nargs="+", type=int, default=list(im.SEEDS),
+                    help="collect seeds, each an integer in [0, 2^32 - 1] (default 0 1 2 3 4)")
+    ip.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
+    _out(ip, "imu-mount", "reports/imu_mount", "imu_mount.md, imu_mount.json and cases/")
+    _quiet(ip)
+    ip.set_defaults(func=cmd_imu_mount)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its
     # report module, which loads the simulation.

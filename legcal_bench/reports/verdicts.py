@@ -57,28 +57,17 @@ def torso_imu_legmap(folder: Path) -> Path:
 
 def run_case(job: tuple[str, str, str, int]) -> dict:
     """One case: (label, robot spec, mode, seed) collected, calibrated and scored."""
-    from legcal_bench.calibrators.base import calibrate_training
-    from legcal_bench.calibrators.registry import get_calibrator
-    from legcal_bench.data.recording import load_session
     from legcal_bench.errors import HoldError
-    from legcal_bench.evaluation.scoring import score
-    from legcal_bench.files.parallel import single_thread
-    from legcal_bench.files.scratch import scratch_dir
-    from legcal_bench.protocol.collect import CollectConfig, collect
     from legcal_bench.provenance import code_version, describe
-    from legcal_bench.robots import load_robot
+    from legcal_bench.reports.realistic_set import calibrated_set
+    from legcal_bench.robots import robot_label
 
-    single_thread()
     label, robot, mode, seed = job
-    legmap = load_robot(robot)
-    with scratch_dir("verdicts") as tmp:
-        try:
-            collect(CollectConfig(robot=robot, mode=mode, sensors="realistic", seed=seed), tmp, progress=False)
-        except HoldError as e:  # a set the robot cannot hold has no result to judge: said, not a crash
-            return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": None,
-                    "not_collected": str(e).split(". Likely cause")[0], "code": describe(code_version())}
-        result = calibrate_training(get_calibrator("interfoot"), legmap, load_session(tmp, robot=legmap))
-        s = score(str(tmp), result, legmap)
+    try:
+        legmap, _, result, s = calibrated_set(robot, mode, seed, "verdicts")
+    except HoldError as e:  # a set the robot cannot hold has no result to judge: said, not a crash
+        return {"label": label, "robot": robot_label(robot), "mode": mode, "seed": seed, "verdict": None,
+                "not_collected": str(e).split(". Likely cause")[0], "code": describe(code_version())}
     held = s.get("heldout", {}).get("foot_height_rms_true_mm", {})
     return {"label": label, "robot": legmap.name, "mode": mode, "seed": seed, "verdict": result.decision,
             "reasons": result.verdict["reasons"], "recovery_rms_deg": s["recovery"]["rms_error_deg"],

@@ -15,6 +15,7 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 
 import numpy as np
 import yaml
+from scipy.spatial.transform import Rotation
 from dm_control import mjcf
 
 from legcal_bench.files.atomic import atomic_write_text
@@ -89,10 +90,14 @@ def _foot(design: LegDesign, side: str) -> _Foot:
 
 
 def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool = True,
-                foot_frame_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)) -> tuple[mjcf.RootElement, LegMap]:
+                foot_frame_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
+                waist: int = 1) -> tuple[mjcf.RootElement, LegMap]:
     """MJCF model and leg map for `design`.
 
-    `upper_body` adds a waist and two arm joints (held joints), `sole_sites=False`
+    `upper_body` adds a waist and two arm joints (held joints): the waist of `waist` joints
+    (1: yaw; 3: yaw, roll, pitch, with an IMU site `imu_in_torso` in the torso above
+    them, tilted by 2 and 3 deg as a mounting is: the leg map's IMU stays the pelvis's,
+    the torso's twin names it with `imu.through`), `sole_sites=False`
     gives the soles as poses relative to the foot body instead of sites, and
     `foot_frame_rpy` rotates the foot body's frame away from the sole: both shape
     the synthetic test robot that exercises what external robots need.
@@ -114,8 +119,17 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
     pelvis.add("site", name="imu", pos=list(design.imu_pos), size=[0.01])
     held: dict[str, float] = {}
     if upper_body:
+        if waist not in (1, 3):
+            raise ValueError(f"waist={waist!r}: 1 (yaw) or 3 (yaw, roll, pitch) joints")
         torso = pelvis.add("body", name="torso", pos=[0, 0, 0.25 * design.pelvis_box[2] * 4])
         torso.add("joint", name="waist_yaw_joint", axis=[0, 0, 1], range=[-1, 1])
+        if waist == 3:  # yaw, then roll and pitch in bodies of their own (a serial waist)
+            for joint, axis in (("waist_roll_joint", [1, 0, 0]), ("waist_pitch_joint", [0, 1, 0])):
+                torso.add("inertial", pos=[0, 0, 0.02], mass=0.3, diaginertia=[0.001, 0.001, 0.001])
+                torso = torso.add("body", name=joint.replace("_joint", "_link"), pos=[0, 0, 0.04])
+                torso.add("joint", name=joint, axis=axis, range=[-0.5, 0.5])
+            torso.add("site", name="imu_in_torso", pos=[0.03, 0.0, 0.12], size=[0.01],
+                      quat=wxyz(Rotation.from_euler("xyz", [np.deg2rad(2.0), np.deg2rad(3.0), 0.0])).tolist())
         torso.add("inertial", pos=[0, 0, 0.1], mass=4.0, diaginertia=[0.05, 0.05, 0.03])
         for side in SIDES:
             arm = torso.add("body", name=f"{side}_arm", pos=_mirror((0, 0.2, 0.15), side))
@@ -126,6 +140,8 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
             fore.add("inertial", pos=[0, 0, -0.12], mass=1.2, diaginertia=[0.01, 0.01, 0.002])
         held = {"waist_yaw_joint": 0.1, "left_shoulder_pitch_joint": 0.3, "right_shoulder_pitch_joint": 0.3,
                 "left_elbow_joint": -0.5, "right_elbow_joint": -0.5}
+        if waist == 3:
+            held.update(waist_roll_joint=0.05, waist_pitch_joint=0.15)
 
     legs: dict[str, Leg] = {}
     roles, slot_pos = _chain(design)  # slot origins in their parent, each the offset to the previous slot's child
@@ -166,8 +182,6 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
             sole = FrameSpec(body=foot.name, pos=tuple(sole_pos.round(6).tolist()))
         if any(foot_frame_rpy):
             # Rotate the foot body's frame; the sole frame stays where it was.
-            from scipy.spatial.transform import Rotation
-
             rot = Rotation.from_euler("xyz", foot_frame_rpy)
             foot.quat = wxyz(rot).tolist()
             inv = rot.inv()

@@ -179,6 +179,15 @@ class LegKinematics:
         self.sole_frame = {s: self._add_frame(f"legcal_{s}_sole", legmap.legs[s].sole, f"legs.{s}.sole")
                            for s in SIDES}
         self.imu_frame = self._add_frame("legcal_imu", legmap.imu, "imu")
+        # The joints between the pelvis and the IMU (a torso IMU's waist): held in static
+        # collection, the IMU's pose in the pelvis frame is the one at their held angles.
+        base = set(int(j) for j in m.supports[m.frames[self.pelvis_frame].parentJoint])
+        self.imu_joints = tuple(m.names[j] for j in m.supports[m.frames[self.imu_frame].parentJoint]
+                                if int(j) not in base)
+        stray = [j for j in legmap.imu_through if j not in self.imu_joints]
+        if stray:
+            raise LegMapError(f"{legmap.source or legmap.name}: imu.through lists {stray}, not between the pelvis and "
+                              f"the IMU's body (the joints there: {list(self.imu_joints) or 'none'}); list those")
         self.ft_frame = ({s: self._add_frame(f"legcal_{s}_ft", legmap.legs[s].ft, f"legs.{s}.ft") for s in SIDES}
                          if all(legmap.legs[s].ft is not None for s in SIDES) else {})
         self.data = m.createData()

@@ -27,7 +27,7 @@ CORNER_NAMES = ("toe_left", "toe_right", "heel_left", "heel_right")
 ABSENT_ALLOWED = ("ankle_roll",)
 # The leg map's keys (a closed format: a misspelt key is refused, with the closest named).
 TOP_FIELDS = ("schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad", "held_joints_rad",
-              "servo_gains", "absent_roles", "packages")
+              "servo_gains", "absent_roles", "packages", "policy_imu")
 LEG_FIELDS = ("joints", "sole", "corners", "ft")
 FRAME_FIELDS = ("site", "body", "pos", "rpy")
 
@@ -89,6 +89,13 @@ class LegMap:
     # The folders of the ROS packages the URDF's `package://` URIs name (beside the
     # environment's, `legcal_bench.robots.urdf.find_package`).
     packages: dict[str, Path] = field(default_factory=dict)
+    # The calibration IMU's frame sits above these non-leg joints (`imu.through`: a torso
+    # IMU above the waist), held in static collection; the IMU is carried to the pelvis
+    # through them at their held angles (`legcal_bench.robots.kinematics`).
+    imu_through: tuple[str, ...] = ()
+    # The IMU a walking policy reads, when not the calibration's (`policy_imu`): walking
+    # simulates it; static collection and calibration use `imu`.
+    policy_imu: FrameSpec | None = None
 
     @property
     def model_file(self) -> Path:
@@ -142,7 +149,7 @@ class LegMap:
             "name": self.name,
             key: str(model),
             "pelvis": self.pelvis,
-            "imu": self.imu.to_dict(),
+            "imu": {**self.imu.to_dict(), **({"through": list(self.imu_through)} if self.imu_through else {})},
             "knee_straight_rad": self.knee_straight_rad,
             "legs": {},
         }
@@ -162,6 +169,8 @@ class LegMap:
             d["held_joints_rad"] = dict(self.held_joints_rad)
         if self.servo_gains:
             d["servo_gains"] = {k: list(v) for k, v in self.servo_gains.items()}
+        if self.policy_imu is not None:
+            d["policy_imu"] = self.policy_imu.to_dict()
         if self.packages:
             d["packages"] = {k: (_relpath(v, mjcf_relative_to) if mjcf_relative_to is not None else str(v))
                              for k, v in self.packages.items()}
@@ -354,7 +363,22 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
     names = [j.name for s in SIDES for j in legs[s].joints]
     if len(set(names)) != len(names):
         raise LegMapError(f"{where}: the {len(names)} leg joint names must be distinct; got {names}")
-    imu = _frame(data["imu"], f"{where}: imu")
+    imu_d = data["imu"]
+    through: tuple[str, ...] = ()
+    if isinstance(imu_d, dict) and "through" in imu_d:
+        imu_d = dict(imu_d)
+        t = imu_d.pop("through")
+        if not isinstance(t, list) or not t:
+            raise LegMapError(f"{where}: imu.through is {shown(t)}: give the non-leg joints between the pelvis and "
+                              "the IMU as a list of names, e.g. [waist_yaw_joint, waist_roll_joint, waist_pitch_joint]")
+        through = tuple(_name(j, f"{where}: imu.through entry", "a joint's name") for j in t)
+        bad = [j for j in through if j in names]
+        if bad or len(set(through)) != len(through):
+            raise LegMapError(f"{where}: imu.through {list(through)}: " + (
+                f"{bad[0]} is a leg joint; list only the joints between the pelvis and the IMU's body" if bad else
+                "each joint once"))
+    imu = _frame(imu_d, f"{where}: imu")
+    policy_imu = _frame(data["policy_imu"], f"{where}: policy_imu") if data.get("policy_imu") is not None else None
     knee = _number(data.get("knee_straight_rad", 0.0), f"{where}: knee_straight_rad",
                    "the knee angle of a straight leg, in radians; 0 if the straight leg is at zero")
     held_d = _optional_mapping(data, "held_joints_rad", where, "joint names to angles in radians")
@@ -392,7 +416,7 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         raise LegMapError(f"{where}: field 'packages' resolves a URDF's package:// URIs; this leg map names an MJCF")
     urdf = None
     if kind == "urdf":
-        sites = [f for f, spec in [("imu", data["imu"])] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES
+        sites = [f for f, spec in [("imu", data["imu"]), ("policy_imu", data.get("policy_imu"))] + [(f"legs.{s}.{k}", legs_d[s].get(k)) for s in SIDES
                                                              for k in ("sole", "ft")]
                  if isinstance(spec, dict) and "site" in spec]
         if sites:
@@ -413,6 +437,8 @@ def parse_legmap(data: dict, base_dir: Path, source: Path | None = None) -> LegM
         servo_gains=gains,
         source=source,
         packages=packages,
+        imu_through=through,
+        policy_imu=policy_imu,
     )
 
 

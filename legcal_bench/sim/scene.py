@@ -157,7 +157,10 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
             _add_site(m, f"legcal_{side}_corner_{c}", leg.sole, f"{where}: legs.{side}.sole", leg.corners[c])
             for c in CORNER_NAMES
         ]
-    imu_site = _add_site(m, "legcal_imu", legmap.imu, f"{where}: imu")
+    # Walking simulates the IMU its policy reads (`policy_imu`, else the leg map's), static modes the calibration's.
+    walking_imu = mode == "walking" and legmap.policy_imu is not None
+    imu_site = _add_site(m, "legcal_imu", legmap.policy_imu if walking_imu else legmap.imu,
+                         f"{where}: {'policy_imu' if walking_imu else 'imu'}")
     m.sensor.add("accelerometer", name="legcal_imu_acc", site=imu_site)
     m.sensor.add("gyro", name="legcal_imu_gyro", site=imu_site)
     has_ft = all(legmap.legs[s].ft is not None for s in SIDES)

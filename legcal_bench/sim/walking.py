@@ -38,7 +38,7 @@ position is the sole frame's at that step) and falls (`FALL_HEIGHT_FRACTION`,
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import mujoco
 import numpy as np
@@ -214,7 +214,9 @@ class WalkingSim:
         self.scene = build_walking_scene(legmap, config)
         self.model = self.scene.model
         self.data = mujoco.MjData(self.model)
-        self.kin = LegKinematics(legmap)  # the nominal IMU mount
+        # The nominal mount of the IMU the policy reads (`policy_imu`, else the leg map's IMU)
+        self.kin = LegKinematics(replace(legmap, imu=legmap.policy_imu, imu_through=())
+                                 if legmap.policy_imu is not None else legmap)
         self.R_BI = self.kin.R_BI  # nominal IMU mount in the base frame
         self.filter = GravityFilter()
         sc, m = self.scene, self.model

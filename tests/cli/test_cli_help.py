@@ -25,7 +25,8 @@ COMMITTED = ("leaderboard", "reports", "policies", "examples", "docs")
 # Options that name something a command writes (files or folders).
 OUTPUTS = {"out", "data", "plots", "plot", "strip", "mjcf_out", "urdf_out", "ros2_params"}
 REPORT_GENERATORS = {"reproduce", "bench-speed", "bench-env", "robots-check", "data-checks", "effects-table",
-                     "contact-table", "contact-floor", "contact-holds", "verdicts", "regression"}
+                     "contact-table", "contact-floor", "contact-holds", "verdicts", "imu-mount",
+                     "regression"}
 EVERYDAY = {"import", "check", "calibrate", "score", "report", "export", "diagnose", "collect", "walk", "bench"}
 
 

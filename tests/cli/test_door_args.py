@@ -107,6 +107,7 @@ def no_work(monkeypatch):
         "legcal_bench.reports.contact_holds": ["build"],
         "legcal_bench.reports.regression": ["compute", "update"],
         "legcal_bench.reports.verdicts": ["measure"],
+        "legcal_bench.reports.imu_mount": ["measure"],
     }.items():
         mod = importlib.import_module(module)
         for name in names:
@@ -274,6 +275,8 @@ CASES += [(argv, option, UNWRITABLE if words is None else words) for argv, optio
     (["contact-floor", "--out", f"{NOPE}/r"], "--out", None),
     (["contact-holds", "--out", f"{NOPE}/r"], "--out", None),
     (["verdicts", "--out", f"{NOPE}/r"], "--out", None),
+    (["imu-mount", "--out", f"{NOPE}/r"], "--out", None),
+    (["imu-mount", "--workers", "0", *OUT], "--workers", [">= 1"]),
     (["regression", "--update", "--fixture", f"{NOPE}/f.json"], "--fixture", None),
     # the report commands' numbers (they skipped the door before #58: these ran until killed)
     (["contact-floor", "--workers", "0", *OUT], "--workers", [">= 1"]),
