@@ -65,12 +65,22 @@ class ModelJoint:
     keyframe: float | None  # the first keyframe's value, None without keyframes
 
 
+@dataclass(frozen=True)
+class Coupling:
+    """A joint equality of the model between two joints: joint = c0 + c1 drive (+ ...)."""
+
+    joint: str
+    drive: str
+    polycoef: tuple[float, ...]  # MuJoCo's five coefficients
+
+
 def is_pattern(key: str) -> bool:
     return any(c in key for c in PATTERN_CHARS)
 
 
 @lru_cache(maxsize=32)
-def _model_joints(path: str, _stamp: tuple[int, int]) -> tuple[tuple[ModelJoint, ...], str | None]:
+def _model_joints(path: str, _stamp: tuple[int, int]) -> tuple[tuple[ModelJoint, ...], str | None,
+                                                                 tuple[Coupling, ...]]:
     import mujoco
 
     try:
@@ -93,11 +103,28 @@ def _model_joints(path: str, _stamp: tuple[int, int]) -> tuple[tuple[ModelJoint,
         out.append(ModelJoint(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}", kind,
                               float(model.qpos0[adr]) if scalar else 0.0,
                               float(model.key_qpos[0, adr]) if scalar and model.nkey else None))
-    return tuple(out), key_name
+    couplings = tuple(
+        Coupling(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(model.eq_obj1id[e])),
+                 mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(model.eq_obj2id[e])),
+                 tuple(float(c) for c in model.eq_data[e, :5]))
+        for e in range(model.neq)
+        if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[e] >= 0 and model.eq_active0[e])
+    return tuple(out), key_name, couplings
 
 
 def model_joints(mjcf: Path) -> tuple[tuple[ModelJoint, ...], str | None]:
     """(every joint of the robot file, in MuJoCo's order; the first keyframe's name or None)."""
+    return _model_table(mjcf)[:2]
+
+
+def joint_couplings(mjcf: Path) -> tuple[Coupling, ...]:
+    """The model's active joint equalities between two joints (an MJCF `<equality><joint
+    joint1= joint2=>`, a URDF `<mimic>` as MuJoCo compiles it): a joint driven through
+    another (a gear or a drive joint) is one of them."""
+    return _model_table(mjcf)[2]
+
+
+def _model_table(mjcf: Path):
     p = Path(mjcf).resolve()
     st = p.stat()
     return _model_joints(str(p), (st.st_mtime_ns, st.st_size))
@@ -115,7 +142,11 @@ def joint_holds(legmap: LegMap) -> tuple[JointHold, ...]:
         if name not in names:
             raise LegMapError(f"{where}: held_joints_rad.{name}: no joint of that name in {legmap.model_file}; "
                               f"its non-leg joints are {_listing(joints, legs)}")
-    held = [j for j in joints if j.kind != "free" and j.name not in legs and not j.name.startswith(OWN_PREFIX)]
+    drives = {c.drive for c in joint_couplings(legmap.mjcf) if c.joint in legs} | {
+        c.joint for c in joint_couplings(legmap.mjcf) if c.drive in legs}
+    # A joint coupled to a leg joint moves with it (its drive): holding it would lock the leg.
+    held = [j for j in joints if j.kind != "free" and j.name not in legs and not j.name.startswith(OWN_PREFIX)
+            and j.name not in drives]
     for key in legmap.servo_gains:
         if key in legs:
             continue

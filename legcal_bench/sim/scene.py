@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.frames import mjcf_element
-from legcal_bench.robots.holds import JointHold, joint_holds
+from legcal_bench.robots.holds import JointHold, joint_couplings, joint_holds
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -235,7 +235,8 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
     for k, name in enumerate(legmap.joint_names):
         a = position_act[k]
         if a < 0 and motor_act[k] < 0:
-            raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF")
+            raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF"
+                              + _coupling_hint(legmap, name))
         if name in legmap.servo_gains and mode != "walking":
             kp[k], kd[k] = legmap.servo_gains[name]
             source.append("leg map")
@@ -261,6 +262,20 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
         servo_source=tuple(source),
     )
+
+
+def _coupling_hint(legmap: LegMap, name: str) -> str:
+    """What to do when a leg joint is driven through another joint of the model."""
+    for c in joint_couplings(legmap.mjcf):
+        if name in (c.joint, c.drive):
+            other = c.drive if name == c.joint else c.joint
+            return (f"; it is coupled to joint '{other}' by a joint equality (a drive joint, a gear or a URDF mimic: "
+                    f"{c.joint} = {c.polycoef[0]:g} + {c.polycoef[1]:g} {c.drive}"
+                    + (" + higher terms" if any(c.polycoef[2:]) else "") + "), whose actuator turns it. Joints "
+                    "driven through a transmission are not simulated yet (their encoders would read the motor's "
+                    "side): give the leg joint its own actuator in the model (its encoder on the joint's output), "
+                    "see docs/leg-map.md, 'Joints driven through a transmission'")
+    return ": give it a <position> actuator or a <motor> (with servo_gains in the leg map)"
 
 
 def _index_holds(scene: Scene, holds: tuple[JointHold, ...], mute: bool) -> None:
