@@ -43,7 +43,7 @@ def torso_imu_legmap(folder: Path) -> Path:
     doc = yaml.safe_load(src.read_text())
     doc["name"] = "playground_g1_torso_imu"
     doc["imu"] = {"site": TORSO_SITE}
-    # Its waist undeclared: the leg map holds no waist joint (the torso then rides on them).
+    # Its waist undeclared (no imu.through) and given no hold angle: held at the model's keyframe (#59).
     doc["held_joints_rad"] = {k: v for k, v in (doc.get("held_joints_rad") or {}).items() if "waist" not in k}
     folder.mkdir(parents=True, exist_ok=True)
     # The model's path from the new leg map's folder (a checkout's reports/verdicts/ reaches
