@@ -4,8 +4,11 @@ Clean realistic session sets of each robot on the weld and the contact floor, ea
 calibrated by the inter-foot calibrator: there every `do-not-apply` is a false refusal
 and every `review` a doubt the data did not earn. Beside them the torso-IMU case: the
 whole-body G1 (`examples/playground_g1.legmap.yaml`) with its leg map's IMU moved to
-the model's `imu_in_torso` site, above the waist joints the leg map does not declare;
-its offsets are not the robot's, and its verdict must be `do-not-apply`.
+the model's `imu_in_torso` site, above the waist joints the leg map does not declare
+(`imu.through`): on a real robot the waist's offsets move that IMU's vertical, unknown to
+the calibration, and its verdict must be `do-not-apply` (the IMU-mount finding,
+`legcal_bench.estimation.checks.imu_mount`; the simulated waist is held, so its offsets
+happen to be right here).
 
 Each case is written as it finishes (`<out>/cases/`), so a stopped run resumes; the page
 is `<out>/verdicts.md` and `.json`. Light at import (the command line's parser reads its
