@@ -31,6 +31,7 @@ from legcal_bench.estimation.verdict import LIMITS, Finding, check_verdict, judg
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.robots.transmission import motor_offsets, transmissions
 from legcal_bench.sim.sensors import SensorModel
 
 ENTRY_POINT_GROUP = "legcal_bench.calibrators"
@@ -193,6 +194,10 @@ def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[R
     result = calibrator.calibrate(robot, recs)
     result.warnings = [*result.warnings, *motion_warnings, *undeclared_sensor_warnings(recs)]
     result.diagnostics.setdefault("motion", evidence)
+    drives = transmissions(robot)
+    if drives:  # the encoders' own offsets, where a transmission puts them (`legcal_bench.robots.transmission`)
+        result.diagnostics["offsets_motor_rad"] = motor_offsets(result.offsets_rad, robot)
+        result.diagnostics["transmissions"] = {n: {"c0": t.c0, "c1": t.c1, "kind": t.kind} for n, t in drives.items()}
     result.session = session_identity(recs)
     result.judge()
     return result

@@ -65,8 +65,11 @@ def format_result(result, names: list[str]) -> str:
 
     c = result.conditioning
     lines = [headline(result.verdict), f"{result.calibrator} on {result.robot}: offsets (deg)"]
+    motor, drives = result.diagnostics.get("offsets_motor_rad"), result.diagnostics.get("transmissions", {})
     for n in names:
-        lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}")
+        lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}" + (
+            f"   at its encoder (motor side, {drives[n]['kind']}): {np.rad2deg(motor[n]):+8.4f}"
+            if motor and n in drives else ""))
     if result.pitch_sums_rad:
         ps = result.pitch_sums_rad
         lines.append("pitch sums (deg): " + ", ".join(f"{k} {np.rad2deg(v):+.4f}" for k, v in ps.items()))

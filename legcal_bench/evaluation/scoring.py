@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from legcal_bench.calibrators.base import CalibrationResult
-from legcal_bench.data.recording import check_against_robot, list_segments, load_recording, load_truth, truth_path
+from legcal_bench.data.recording import check_against_robot, in_joint_space, list_segments, load_recording, load_truth, truth_path
 from legcal_bench.errors import CalibrationError, RecordingError
 from legcal_bench.estimation.checks.datacheck import heldout_signs
 from legcal_bench.estimation.checks.motion import resolve_motion
@@ -105,7 +105,7 @@ def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: b
     dq = result.offsets_vector(names)
     result.check_robot(legmap)
     paths = list_segments(bags, allow_partial)
-    recordings = [load_recording(p, names) for p in paths]
+    recordings = in_joint_space([load_recording(p, names) for p in paths], legmap)
     check_against_robot(recordings, legmap)
     result.check_session(recordings, f"--bags {bags}")
     truths = _truths(paths, names)

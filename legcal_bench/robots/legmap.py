@@ -57,6 +57,9 @@ class FrameSpec:
 class Joint:
     name: str
     role: str
+    # Motor turns per joint turn when the encoder sits on the motor behind a fixed gear
+    # (`legcal_bench.robots.transmission`); 1: the encoder reads the joint.
+    ratio: float = 1.0
 
 
 @dataclass(frozen=True)
@@ -156,7 +159,8 @@ class LegMap:
         for side in SIDES:
             leg = self.legs[side]
             ld: dict = {
-                "joints": [{"name": j.name, "role": j.role} for j in leg.joints],
+                "joints": [{"name": j.name, "role": j.role, **({"ratio": j.ratio} if j.ratio != 1.0 else {})}
+                           for j in leg.joints],
                 "sole": leg.sole.to_dict(),
                 "corners": {k: list(v) for k, v in leg.corners.items()},
             }
@@ -290,11 +294,16 @@ def _leg(ld, side: str, where: str, expected_roles: tuple[str, ...]) -> Leg:
         jw = f"{lw}.joints[{i}]"
         if not isinstance(jd, dict) or "name" not in jd or "role" not in jd:
             raise LegMapError(f"{jw}: expected {{name: ..., role: ...}}, got {shown(jd)}")
-        _known(jw, jd, ("name", "role"))
+        _known(jw, jd, ("name", "role", "ratio"))
         role = jd["role"]
         if not isinstance(role, str) or role not in LEG_ROLES:
             raise LegMapError(f"{jw}.role: {shown(role)} is not one of {list(LEG_ROLES)}")
-        joints.append(Joint(_name(jd["name"], f"{jw}.name", "the joint's name in the model"), role))
+        ratio = _number(jd.get("ratio", 1.0), f"{jw}.ratio", "the motor's turns per turn of the joint (its encoder "
+                        "on the motor behind a gear; negative if it turns the other way)")
+        if ratio == 0.0:
+            raise LegMapError(f"{jw}.ratio is 0: give the motor's turns per turn of the joint (e.g. 2.0), or leave "
+                              "it out for an encoder on the joint")
+        joints.append(Joint(_name(jd["name"], f"{jw}.name", "the joint's name in the model"), role, ratio))
     roles = [j.role for j in joints]
     ankles = [list(expected_roles[3:])]
     if len(ankles[0]) == 3:  # the ankle's two joints in either order

@@ -49,6 +49,7 @@ from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, holdable_postures, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.robots.transmission import encoder_map
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SimSensors
@@ -178,6 +179,7 @@ class DoubleSupportSim:
                                           self.physics_dt)
             self._plan_data = mujoco.MjData(self.scene.model)  # where the plan puts the centre of mass
         self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
+        self._encoder_map = encoder_map(self.sim_legmap)  # (c0, c1): the joints' angles from their encoders'
         self.left = self.right = None
         self.standing = False
 
@@ -376,7 +378,7 @@ class DoubleSupportSim:
         """One physics step per row of `targets` (joint-space servo targets)."""
         sc, d, mj_step = self.scene, self.data, mujoco.mj_step
         m = sc.model
-        pos_act, pos_cols, motors = sc.servo
+        pos_act, pos_cols, motors, _ = sc.servo
         if self.regulator is not None:  # the standing controller's corrections, tick by tick
             reg = self.regulator
             for target in targets:
@@ -454,7 +456,9 @@ class DoubleSupportSim:
         enc = slice(6, 6 + self.legmap.n_joints)  # after the IMU's 3 + 3
         noise = rng.standard_normal((n, enc.stop + (12 if self.has_ft else 0)))
         imu = sen.imu_samples(np.stack([buf["imu_true_acc"], buf["imu_true_gyro"]], axis=1), noise[:, :6])
-        obs = {"q_enc": sen.encoders(buf["q_motor"] - self.offsets, rng, noise[:, enc]),
+        # An encoder behind a transmission reads its motor: e = (q - c0) / c1, its offset dq / c1.
+        c0, c1 = self._encoder_map
+        obs = {"q_enc": sen.encoders((buf["q_motor"] - self.offsets - c0) / c1, rng, noise[:, enc]),
                "imu_acc": np.ascontiguousarray(imu[:, 0]), "imu_gyro": np.ascontiguousarray(imu[:, 1])}
         if self.has_ft:
             obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, enc.stop:].reshape(n, 2, 6))

@@ -22,7 +22,8 @@ from scipy.spatial.transform import Rotation
 from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.frames import mjcf_element
-from legcal_bench.robots.holds import JointHold, joint_couplings, joint_holds
+from legcal_bench.robots.holds import JointHold, joint_holds
+from legcal_bench.robots.transmission import transmissions
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -74,8 +75,20 @@ class Scene:
     holds: tuple = ()  # the held non-leg joints (`legcal_bench.robots.holds.JointHold`), as simulated
     hold_qpos_adr: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (h,) their qpos addresses
     hold_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (h,) what each is held at
+    # Per leg joint, the joint its actuator turns (the leg joint, or its drive joint:
+    # `legcal_bench.robots.transmission`) and the map to that joint's angle,
+    # q_leg = act_c0 + act_c1 q_actuated (identity without a drive joint).
+    act_qpos_adr: np.ndarray | None = None
+    act_dof_adr: np.ndarray | None = None
+    act_c0: np.ndarray | None = None
+    act_c1: np.ndarray | None = None
 
     def __post_init__(self):
+        n = len(self.qpos_adr)
+        self.act_qpos_adr = self.qpos_adr if self.act_qpos_adr is None else self.act_qpos_adr
+        self.act_dof_adr = self.dof_adr if self.act_dof_adr is None else self.act_dof_adr
+        self.act_c0 = np.zeros(n) if self.act_c0 is None else self.act_c0
+        self.act_c1 = np.ones(n) if self.act_c1 is None else self.act_c1
         self._layout()
 
     def _layout(self) -> None:
@@ -83,11 +96,14 @@ class Scene:
         act, cols = self.position_act[pa], np.flatnonzero(pa)
         # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + n] = target.
         n = len(self.position_act)
-        contiguous = pa.all() and np.array_equal(act, np.arange(act[0], act[0] + n))
+        driven = bool(self.act_c0.any() or (self.act_c1 != 1.0).any())
+        contiguous = not driven and pa.all() and np.array_equal(act, np.arange(act[0], act[0] + n))
+        c2 = self.act_c1 ** 2  # gains in the actuated joint's space: kp_actuated = kp c1^2 (power is conserved)
         self.servo = (
             slice(int(act[0]), int(act[0]) + n) if contiguous else act, None if contiguous else cols,
-            (self.motor_act[ma], np.flatnonzero(ma), self.qpos_adr[ma], self.dof_adr[ma], self.servo_kp[ma],
-             self.servo_kd[ma], self.motor_gear[ma]) if ma.any() else None)
+            (self.motor_act[ma], np.flatnonzero(ma), self.act_qpos_adr[ma], self.act_dof_adr[ma],
+             (self.servo_kp * c2)[ma], (self.servo_kd * c2)[ma], self.motor_gear[ma]) if ma.any() else None,
+            (self.act_c0, self.act_c1) if driven else None)
 
 
 def _find(model: mjcf.RootElement, kind: str, name: str, where: str):
@@ -213,13 +229,18 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         if name and name.startswith("legcal_"):
             sensor_adr[name[len("legcal_"):]] = int(model.sensor_adr[i])
     nj = legmap.n_joints
+    # A leg joint turned by a drive joint (`legcal_bench.robots.transmission`): its actuator is the drive's.
+    drive = {n: t for n, t in transmissions(legmap).items() if t.drive is not None}
+    actuated = [jid(drive[n].drive) if n in drive else j for n, j in zip(legmap.joint_names, joints)]
+    c0 = np.array([drive[n].c0 if n in drive else 0.0 for n in legmap.joint_names])
+    c1 = np.array([drive[n].c1 if n in drive else 1.0 for n in legmap.joint_names])
     position_act = -np.ones(nj, dtype=int)
     motor_act = -np.ones(nj, dtype=int)
     gear = np.ones(nj)
     for a in range(model.nu):
-        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] not in joints:
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or model.actuator_trnid[a, 0] not in actuated:
             continue
-        k = joints.index(int(model.actuator_trnid[a, 0]))
+        k = actuated.index(int(model.actuator_trnid[a, 0]))
         g, b = model.actuator_gainprm[a], model.actuator_biasprm[a]
         is_position = g[0] > 0 and np.isclose(b[1], -g[0]) and model.actuator_gaintype[a] == 0
         is_motor = np.isclose(g[0], 1.0) and not np.any(b[:3]) and model.actuator_biastype[a] == 0
@@ -240,8 +261,9 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         if name in legmap.servo_gains and mode != "walking":
             kp[k], kd[k] = legmap.servo_gains[name]
             source.append("leg map")
-        elif a >= 0:
-            kp[k], kd[k] = model.actuator_gainprm[a, 0], 0.0 - model.actuator_biasprm[a, 2]  # no -0.0
+        elif a >= 0:  # in the leg joint's angle: a drive's gains over c1^2
+            kp[k], kd[k] = (model.actuator_gainprm[a, 0] / c1[k] ** 2,
+                            (0.0 - model.actuator_biasprm[a, 2]) / c1[k] ** 2)  # no -0.0
             source.append("MJCF")
         else:
             source.append("none")
@@ -261,20 +283,17 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         imu_site=sid(imu_site), mocap=mocap, sensor_adr=sensor_adr, has_ft=has_ft,
         position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
         servo_source=tuple(source),
+        act_qpos_adr=np.array([model.jnt_qposadr[j] for j in actuated]),
+        act_dof_adr=np.array([model.jnt_dofadr[j] for j in actuated]), act_c0=c0, act_c1=c1,
     )
 
 
 def _coupling_hint(legmap: LegMap, name: str) -> str:
-    """What to do when a leg joint is driven through another joint of the model."""
-    for c in joint_couplings(legmap.mjcf):
-        if name in (c.joint, c.drive):
-            other = c.drive if name == c.joint else c.joint
-            return (f"; it is coupled to joint '{other}' by a joint equality (a drive joint, a gear or a URDF mimic: "
-                    f"{c.joint} = {c.polycoef[0]:g} + {c.polycoef[1]:g} {c.drive}"
-                    + (" + higher terms" if any(c.polycoef[2:]) else "") + "), whose actuator turns it. Joints "
-                    "driven through a transmission are not simulated yet (their encoders would read the motor's "
-                    "side): give the leg joint its own actuator in the model (its encoder on the joint's output), "
-                    "see docs/leg-map.md, 'Joints driven through a transmission'")
+    """What to give a leg joint no actuator turns."""
+    for t in transmissions(legmap).values():
+        if t.joint == name and t.drive is not None:
+            return (f"; it is turned by its drive joint '{t.drive}' (a joint equality in the model), which has no "
+                    "actuator either: give the drive a <position> actuator or a <motor>")
     return ": give it a <position> actuator or a <motor> (with servo_gains in the leg map)"
 
 
@@ -301,9 +320,11 @@ def set_servo_gains(scene: Scene, kp: np.ndarray, kd: np.ndarray, source: tuple[
     refuses it)."""
     kp, kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
     m = scene.model
+    c2 = scene.act_c1 ** 2
     for k, a in enumerate(scene.position_act):
         if a >= 0 and np.isfinite(kp[k]):
-            m.actuator_gainprm[a, 0], m.actuator_biasprm[a, 1], m.actuator_biasprm[a, 2] = kp[k], -kp[k], -kd[k]
+            kpa, kda = kp[k] * c2[k], kd[k] * c2[k]
+            m.actuator_gainprm[a, 0], m.actuator_biasprm[a, 1], m.actuator_biasprm[a, 2] = kpa, -kpa, -kda
     scene.servo_kp, scene.servo_kd, scene.servo_source = kp.copy(), kd.copy(), tuple(source)
     scene._layout()
 
@@ -312,7 +333,9 @@ def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
     """Drive the leg joints toward `target` (joint space): position actuators take the
     target as ctrl; torque motors get the leg map's PD law. It runs before every physics
     step, with the index layout worked out once (`Scene.servo`)."""
-    pos_act, pos_cols, motors = scene.servo
+    pos_act, pos_cols, motors, driven = scene.servo
+    if driven is not None:  # targets of drive joints in their own angle: (q - c0) / c1
+        target = (target - driven[0]) / driven[1]
     if pos_cols is None:
         data.ctrl[pos_act] = target
     elif len(pos_cols):

@@ -50,6 +50,7 @@ from legcal_bench.errors import ConfigError
 from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.robots.transmission import transmissions
 from legcal_bench.sim.orientation import GravityFilter
 from legcal_bench.sim.scene import Scene, compose_robot
 from legcal_bench.sim.sensors import SimSensors
@@ -130,6 +131,11 @@ def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
     if len(cfg.default_q) != legmap.n_joints:
         raise ConfigError(f"walking config: {len(cfg.default_q)} joint values (kp, kd, default_q) but robot "
                           f"{legmap.name} has {legmap.n_joints} leg joints")
+    driven = sorted(n for n, t in transmissions(legmap).items() if t.drive is not None)
+    if driven:
+        raise ConfigError(f"{legmap.source or legmap.name}: leg joints {driven} are turned by drive joints (joint "
+                          "equalities in the model): walking does not simulate drive joints yet (static collection "
+                          "does); walk a model whose leg joints carry their actuators")
     m = mjcf_element(legmap.mjcf)
     m.option.timestep = cfg.physics_dt
     if cfg.integrator is not None:

@@ -64,7 +64,6 @@ import numpy as np
 
 from legcal_bench.data.recording import Recording
 from legcal_bench.estimation.checks.imu_mount import imu_mount
-from legcal_bench.estimation.checks.transmission import coupled_leg_joints
 from legcal_bench.estimation.imu.levelling import up_in_base
 from legcal_bench.estimation.verdict import DOUBTS, INVALIDATES, Finding
 from legcal_bench.geometry.lie import Log, frechet_mean, inverse
@@ -110,7 +109,7 @@ def data_warnings(kin: LegKinematics, recordings: list[Recording], dq: np.ndarra
     inter-foot transform gets no further kinematic checks, one with a frozen IMU or a
     vertical inconsistent with the posture no tilt checks."""
     dq = np.zeros(kin.legmap.n_joints) if dq is None else np.asarray(dq, dtype=float)
-    out: list[str] = [*imu_mount(kin), *coupled_leg_joints(kin)]
+    out: list[str] = list(imu_mount(kin))
     frozen: dict[str, set[str]] = {}
     for r in recordings:
         msgs, kinds = frozen_channels(r, kin.legmap.joint_names, limits)

@@ -1,0 +1,85 @@
+"""Leg joints whose encoders read a motor, not the joint: a gear, or a drive joint.
+
+A transmission maps the encoder's (motor's) angle e to the joint's angle q:
+
+    q = c0 + c1 e
+
+- a fixed ratio, the leg map's `ratio` on the joint's entry (motor turns per joint turn,
+  the encoder on the motor): c0 = 0, c1 = 1 / ratio; the model's actuator turns the joint;
+- a coupled drive joint, read from the model: a joint equality `joint = c0 + c1 drive`
+  (MJCF `<equality><joint>`, a URDF `<mimic>` as MuJoCo compiles it), the encoder on the
+  drive and the actuator on the drive.
+
+Offsets live where the encoders are: q = c0 + c1 (e + dq_motor), so a joint-space offset
+dq = c1 dq_motor. Recordings hold the encoders' readings (motor space for these joints);
+`legcal_bench.data.recording.load_session` hands them on in joint space
+(`to_joint_space`), every calibrator and check works in joint space, and results report
+the offsets in both (`motor_offsets`). Joints without a transmission: c0 = 0, c1 = 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from legcal_bench.errors import LegMapError
+from legcal_bench.robots.holds import joint_couplings
+from legcal_bench.robots.legmap import LegMap
+
+
+@dataclass(frozen=True)
+class Transmission:
+    joint: str
+    c0: float
+    c1: float
+    drive: str | None = None  # the drive joint whose actuator turns the leg joint (None: a fixed ratio)
+
+    @property
+    def kind(self) -> str:
+        return "fixed ratio" if self.drive is None else f"drive joint {self.drive}"
+
+
+def transmissions(legmap: LegMap) -> dict[str, Transmission]:
+    """Leg joint name -> its transmission, for the leg joints that have one."""
+    where = str(legmap.source or legmap.name)
+    out: dict[str, Transmission] = {}
+    ratio = {j.name: j.ratio for s in legmap.legs.values() for j in s.joints if j.ratio != 1.0}
+    for name, r in ratio.items():
+        out[name] = Transmission(name, 0.0, 1.0 / r)
+    legs = set(legmap.joint_names)
+    for c in joint_couplings(legmap.mjcf):
+        if c.joint not in legs and c.drive not in legs:
+            continue
+        if c.joint not in legs or c.drive in legs:
+            raise LegMapError(f"{where}: the model's joint equality {c.joint} = f({c.drive}) turns leg joint "
+                              f"{c.drive if c.drive in legs else c.joint} from another joint's side: give the "
+                              "equality with the leg joint as joint1 and its drive as joint2")
+        if any(c.polycoef[2:]) or c.polycoef[1] == 0.0:
+            raise LegMapError(f"{where}: leg joint {c.joint} is coupled to {c.drive} by a polynomial of degree > 1 "
+                              f"(polycoef {list(c.polycoef)}): only a linear transmission (c0 + c1 drive) is read")
+        if c.joint in out:
+            raise LegMapError(f"{where}: leg joint {c.joint} has a ratio in the leg map and a drive joint "
+                              f"({c.drive}) in the model: the drive's coupling is the transmission; drop the ratio")
+        out[c.joint] = Transmission(c.joint, c.polycoef[0], c.polycoef[1], c.drive)
+    return out
+
+
+def encoder_map(legmap: LegMap) -> tuple[np.ndarray, np.ndarray]:
+    """(c0, c1), (n,) each in leg-map order: q = c0 + c1 e per leg joint."""
+    t = transmissions(legmap)
+    c0 = np.array([t[n].c0 if n in t else 0.0 for n in legmap.joint_names])
+    c1 = np.array([t[n].c1 if n in t else 1.0 for n in legmap.joint_names])
+    return c0, c1
+
+
+def to_joint_space(q_enc: np.ndarray, legmap: LegMap) -> np.ndarray:
+    """Encoder readings (N, n) -> joint angles (identity without transmissions)."""
+    c0, c1 = encoder_map(legmap)
+    return np.asarray(q_enc) if not (c0.any() or (c1 != 1.0).any()) else c0 + c1 * np.asarray(q_enc)
+
+
+def motor_offsets(dq: dict[str, float], legmap: LegMap) -> dict[str, float]:
+    """Joint-space offsets -> the encoders' (motor-space) offsets, dq / c1."""
+    t = transmissions(legmap)
+    return {n: v / t[n].c1 if n in t else v for n, v in dq.items()}
