@@ -26,7 +26,7 @@ COMMAND_GROUPS: tuple[tuple[str, str, tuple[str, ...]], ...] = (
     ("maintainers: reports",
      "reports on legcal-bench itself; each writes under runs/ unless --out names the committed folder to update",
      ("reproduce", "bench-speed", "bench-env", "robots-check", "data-checks", "effects-table", "contact-table",
-      "contact-floor", "contact-holds", "verdicts", "imu-mount", "regression")),
+      "contact-floor", "contact-holds", "verdicts", "imu-mount", "vendor-cases", "regression")),
 )
 
 

@@ -72,6 +72,18 @@ def cmd_imu_mount(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_vendor_cases(a: argparse.Namespace) -> int:
+    door(a, out=inputs.output_folder, seeds=inputs.seed, workers=inputs.count)
+    from legcal_bench.reports.vendor_cases import measure
+
+    d = measure(a.out, a.cases, a.seeds, workers=a.workers, progress=not a.quiet)
+    print(f"wrote {a.out}/vendor_cases.md, .json ({len(d['rows'])} sets)")
+    for case, s in d["summary"].items():
+        print(f"  {case:<12} zero noise {s['zero_noise_max_deg']:.1e} deg, weld {s['vs_reference']:.2f}x the "
+              f"A3-like robot's ({', '.join(s['verdicts'])})")
+    return 0
+
+
 def cmd_robots_check(a: argparse.Namespace) -> int:
     door(a, out=inputs.output_folder, seeds=RUN_COUNT)
     from legcal_bench.reports.robots_check import run_robots_check
@@ -336,6 +348,24 @@ def add_commands(sub) -> None:
     _out(ip, "imu-mount", "reports/imu_mount", "imu_mount.md, imu_mount.json and cases/")
     _quiet(ip)
     ip.set_defaults(func=cmd_imu_mount)
+
+    from legcal_bench.reports import vendor_cases as vc
+
+    cp = sub.add_parser("vendor-cases", help="robots as vendors ship them (URDF package, frames, ankle order, torso "
+                                             "IMU, transmissions) against the A3-like robot; writes vendor_cases.md",
+                        description="Each case of legcal_bench.robots.samples, through its leg map alone: a zero-noise "
+                                    "kinematic set (bar: recovery <= 1e-9 deg, at the encoders too) and realistic "
+                                    "weld sets calibrated by interfoot (bar: IMU-removed recovery within "
+                                    f"{vc.RATIO_BAR:g}x of the A3-like robot's). Each case is kept under --out/cases "
+                                    "as it finishes: a stopped run resumes.")
+    cp.add_argument("--cases", nargs="+", default=list(vc.CASES), choices=list(vc.CASES),
+                    help=f"cases (default {' '.join(vc.CASES)})")
+    cp.add_argument("--seeds", nargs="+", type=int, default=list(vc.SEEDS),
+                    help="weld seeds, each an integer in [0, 2^32 - 1] (default 0 1 2)")
+    cp.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
+    _out(cp, "vendor-cases", "reports/vendor_cases", "vendor_cases.md, vendor_cases.json and cases/")
+    _quiet(cp)
+    cp.set_defaults(func=cmd_vendor_cases)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its
     # report module, which loads the simulation.

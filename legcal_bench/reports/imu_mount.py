@@ -17,7 +17,6 @@ is `<out>/imu_mount.md` and `.json`. Light at import.
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -27,7 +26,6 @@ SEEDS = (0, 1, 2, 3, 4)
 RATIO_BAR = 1.5
 G1_EXAMPLE = "examples/playground_g1.legmap.yaml"
 G1_WAIST = ("waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint")
-GENERATED_WAIST = G1_WAIST  # `build_model(..., waist=3)` names its waist joints as the G1 does
 
 
 def twin_legmaps(robot: str, folder: Path) -> dict[str, Path]:
@@ -36,12 +34,10 @@ def twin_legmaps(robot: str, folder: Path) -> dict[str, Path]:
 
     folder.mkdir(parents=True, exist_ok=True)
     if robot == "a3_waist":
-        from legcal_bench.robots.build import write_robot
-        from legcal_bench.robots.design import DESIGNS
+        from legcal_bench.robots.samples import torso_imu
 
-        pelvis = write_robot(DESIGNS["a3"], folder, upper_body=True, waist=3)
-        doc, site, waist = yaml.safe_load(pelvis.read_text()), "imu_in_torso", GENERATED_WAIST
-    elif robot == "playground_g1":
+        return {twin: torso_imu(folder, twin) for twin in TWINS}
+    if robot == "playground_g1":
         from legcal_bench.robots import resolve_robot
 
         src = Path(resolve_robot(G1_EXAMPLE))
@@ -77,7 +73,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
 
 
 def measure(out: str | Path, robots=ROBOTS, seeds=SEEDS, workers: int = 2, progress: bool = True) -> dict:
-    from legcal_bench.files.parallel import map_with_progress
+    from legcal_bench.reports.realistic_set import kept_cases
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
 
@@ -92,23 +88,11 @@ def measure(out: str | Path, robots=ROBOTS, seeds=SEEDS, workers: int = 2, progr
         robot, twin, _, seed = job
         return cases / f"{robot}_{twin}_{seed}.json"
 
-    cases.mkdir(parents=True, exist_ok=True)
-    todo = [j for j in jobs if not path(j).is_file()]
-    map_with_progress(_run_and_keep, [(j, str(path(j))) for j in todo], workers=workers, desc="imu-mount",
-                      progress=progress)
-    rows = [json.loads(path(j).read_text()) for j in jobs]
+    rows = kept_cases(run_case, jobs, [path(j) for j in jobs], workers, "imu-mount", progress)
     made_by = f"legcal-bench imu-mount --robots {' '.join(robots)} --seeds {' '.join(map(str, seeds))} --out {out}"
     data = {"made_by": made_by, "code": code_version(), "rows": rows, "summary": summarize(rows)}
     write_report(out, markdown(rows, data["summary"], made_by, describe(data["code"])), data, name="imu_mount")
     return data
-
-
-def _run_and_keep(arg) -> str:
-    from legcal_bench.files.atomic import atomic_write_json
-
-    job, path = arg
-    atomic_write_json(path, run_case(job))  # kept as it finishes: a stopped run resumes here
-    return path
 
 
 def summarize(rows: list[dict]) -> dict:

@@ -17,7 +17,6 @@ defaults).
 
 from __future__ import annotations
 
-import json
 import os
 from collections import Counter
 from pathlib import Path
@@ -79,7 +78,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
 
 def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: int = 2,
             progress: bool = True) -> dict:
-    from legcal_bench.files.parallel import map_with_progress
+    from legcal_bench.reports.realistic_set import kept_cases
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
     from legcal_bench.robots import robot_label
@@ -95,24 +94,12 @@ def measure(out: str | Path, robots=ROBOTS, modes=MODES, seeds=SEEDS, workers: i
         label, _, mode, seed = job
         return cases / f"{robot_label(label)}_{mode}_{seed}.json"
 
-    todo = [j for j in jobs if not path(j).is_file()]
-    cases.mkdir(parents=True, exist_ok=True)
-    map_with_progress(_run_and_keep, [(j, str(path(j))) for j in todo], workers=workers, desc="verdicts",
-                      progress=progress)
-    rows = [json.loads(path(j).read_text()) for j in jobs]
+    rows = kept_cases(run_case, jobs, [path(j) for j in jobs], workers, "verdicts", progress)
     made_by = (f"legcal-bench verdicts --robots {' '.join(map(str, robots))} --modes {' '.join(modes)} --seeds "
                f"{' '.join(map(str, seeds))} --out {out}")
     data = {"made_by": made_by, "code": code_version(), "rows": rows}
     write_report(out, markdown(rows, made_by, describe(data["code"])), data, name="verdicts")
     return data
-
-
-def _run_and_keep(arg) -> str:
-    from legcal_bench.files.atomic import atomic_write_json
-
-    job, path = arg
-    atomic_write_json(path, run_case(job))  # kept as it finishes: a stopped run resumes here
-    return path
 
 
 def markdown(rows: list[dict], made_by: str, code: str) -> str:

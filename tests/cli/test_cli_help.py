@@ -26,7 +26,7 @@ COMMITTED = ("leaderboard", "reports", "policies", "examples", "docs")
 OUTPUTS = {"out", "data", "plots", "plot", "strip", "mjcf_out", "urdf_out", "ros2_params"}
 REPORT_GENERATORS = {"reproduce", "bench-speed", "bench-env", "robots-check", "data-checks", "effects-table",
                      "contact-table", "contact-floor", "contact-holds", "verdicts", "imu-mount",
-                     "regression"}
+                     "vendor-cases", "regression"}
 EVERYDAY = {"import", "check", "calibrate", "score", "report", "export", "diagnose", "collect", "walk", "bench"}
 
 

@@ -108,6 +108,7 @@ def no_work(monkeypatch):
         "legcal_bench.reports.regression": ["compute", "update"],
         "legcal_bench.reports.verdicts": ["measure"],
         "legcal_bench.reports.imu_mount": ["measure"],
+        "legcal_bench.reports.vendor_cases": ["measure"],
     }.items():
         mod = importlib.import_module(module)
         for name in names:
@@ -277,6 +278,8 @@ CASES += [(argv, option, UNWRITABLE if words is None else words) for argv, optio
     (["verdicts", "--out", f"{NOPE}/r"], "--out", None),
     (["imu-mount", "--out", f"{NOPE}/r"], "--out", None),
     (["imu-mount", "--workers", "0", *OUT], "--workers", [">= 1"]),
+    (["vendor-cases", "--out", f"{NOPE}/r"], "--out", None),
+    (["vendor-cases", "--workers", "0", *OUT], "--workers", [">= 1"]),
     (["regression", "--update", "--fixture", f"{NOPE}/f.json"], "--fixture", None),
     # the report commands' numbers (they skipped the door before #58: these ran until killed)
     (["contact-floor", "--workers", "0", *OUT], "--workers", [">= 1"]),

@@ -3,11 +3,8 @@ joint equality in the model (a URDF mimic compiles to one), and a fixed gear rat
 in the leg map. The recordings hold the motors' readings; calibration works in joint
 space and reports the offsets where the encoders are (motor space) too."""
 
-import shutil
-
 import numpy as np
 import pytest
-import yaml
 
 from legcal_bench import api
 from legcal_bench.data.recording import load_recording, load_truth, list_segments
@@ -16,34 +13,11 @@ from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.build import ASSETS
 from legcal_bench.robots.holds import joint_couplings, joint_holds
+from legcal_bench.robots.samples import a3_with_transmissions
 from legcal_bench.robots.transmission import transmissions
 
-ROTOR = ('<body name="left_hip_yaw_rotor" pos="0 0 -0.05"><joint name="left_hip_yaw_drive" axis="0 0 1" '
-         'range="-2 2"/><inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/></body>\n')
-
-
 def a3_variant(folder, coupled: bool = False, ratio: dict | None = None):
-    """The A3-like robot; `coupled`: its left hip yaw turned by a drive joint on a rotor
-    body at 1:2 (the actuator on the drive, kp 200 there = the original 800 at the joint,
-    the joint equality hip_yaw = 0.5 drive); `ratio`: leg map ratios per joint."""
-    folder.mkdir(parents=True, exist_ok=True)
-    xml = (ASSETS / "a3.xml").read_text()
-    if coupled:
-        anchor = '<body name="left_hip_yaw_link" pos="0 0 -0.075">'
-        assert anchor in xml
-        xml = xml.replace(anchor, ROTOR + anchor, 1)
-        xml = xml.replace('joint="left_hip_yaw_joint" kp="800" kv="32"', 'joint="left_hip_yaw_drive" kp="200" kv="8"')
-        xml = xml.replace("</actuator>", "</actuator>\n  <equality><joint joint1=\"left_hip_yaw_joint\" "
-                          "joint2=\"left_hip_yaw_drive\" polycoef=\"0 0.5 0 0 0\"/></equality>", 1)
-    (folder / "a3.xml").write_text(xml)
-    d = yaml.safe_load((ASSETS / "a3.legmap.yaml").read_text())
-    d["name"] = "a3_transmission"
-    for side in ("left", "right"):
-        for j in d["legs"][side]["joints"]:
-            if j["name"] in (ratio or {}):
-                j["ratio"] = ratio[j["name"]]
-    (folder / "a3.legmap.yaml").write_text(yaml.safe_dump(d))
-    return folder / "a3.legmap.yaml"
+    return a3_with_transmissions(folder, coupled, ratio)
 
 
 @pytest.fixture

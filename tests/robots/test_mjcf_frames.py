@@ -8,49 +8,17 @@ import xml.etree.ElementTree as ET
 
 import mujoco
 import numpy as np
-import yaml
 
 from legcal_bench.robots import ASSETS, load_robot
 from legcal_bench.robots.frames import fold_frames
 from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.samples import framed
 
 
 def _framed(tmp_path, same_robot: bool = False):
-    """The A3-like MJCF with its left leg inside a turned frame, a frame nested in that
-    one around the left knee's body, and the right sole's site and the IMU's inside
-    frames of their bodies; its leg map (the built-in's, pointing at it). `same_robot`:
-    frames that only carry their bodies' offsets (the robot unchanged, as a model
-    grouped by frames has it)."""
-    root = ET.parse(ASSETS / "a3.xml").getroot()
-
-    def wrap(parent, child, **attrs):
-        i = list(parent).index(child)
-        parent.remove(child)
-        frame = ET.Element("frame", **attrs)
-        frame.append(child)
-        parent.insert(i, frame)
-        return frame
-
-    pelvis = root.find(".//body[@name='pelvis']")
-    yaw = root.find(".//body[@name='left_hip_yaw_link']")
-    foot = root.find(".//body[@name='right_foot_link']")
-    if same_robot:
-        for parent, kind, name in ((pelvis, "body", "left_hip_pitch_link"), (yaw, "body", "left_knee_link"),
-                                   (foot, "site", "right_sole"), (pelvis, "site", "imu")):
-            el = parent.find(f"{kind}[@name='{name}']")
-            wrap(parent, el, pos=el.get("pos"))
-            el.set("pos", "0 0 0")
-    else:
-        wrap(pelvis, pelvis.find("body[@name='left_hip_pitch_link']"), pos="0.004 -0.003 0.005", euler="2 -3 4")
-        wrap(yaw, yaw.find("body[@name='left_knee_link']"), quat="0.999 0.02 -0.03 0.01")
-        wrap(foot, foot.find("site[@name='right_sole']"), pos="0.001 0 -0.002", euler="0 1 0")
-        wrap(pelvis, pelvis.find("site[@name='imu']"), euler="0 0 3")
-    xml = tmp_path / "a3_framed.xml"
-    ET.ElementTree(root).write(xml)
-    d = yaml.safe_load((ASSETS / "a3.legmap.yaml").read_text())
-    d["mjcf"] = str(xml)
-    (tmp_path / "a3_framed.legmap.yaml").write_text(yaml.safe_dump(d))
-    return xml, load_robot(str(tmp_path / "a3_framed.legmap.yaml"))
+    """The framed A3-like MJCF and its leg map (`legcal_bench.robots.samples.framed`)."""
+    legmap = framed(tmp_path, same_robot)
+    return tmp_path / "a3_framed.xml", load_robot(str(legmap))
 
 
 def _site_pose(model, data, name):

@@ -6,7 +6,6 @@ unresolved URI refused naming the package and the ways to give it."""
 from __future__ import annotations
 
 import shutil
-import struct
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -21,11 +20,10 @@ from legcal_bench.data.recording import load_session
 from legcal_bench.errors import LegMapError
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
-from legcal_bench.robots.build import write_urdf_robot
-from legcal_bench.robots.design import A3
 from legcal_bench.robots.kinematics import LegKinematics
+from legcal_bench.robots.samples import PACKAGE, ros_package
 
-PKG = "a3_description"
+PKG = PACKAGE
 
 
 @pytest.fixture(autouse=True)
@@ -36,50 +34,9 @@ def cache(tmp_path, monkeypatch):
         monkeypatch.delenv(var, raising=False)
 
 
-def _box_stl(path: Path, size) -> None:
-    """A binary STL of a box of `size` (x, y, z) centred on the origin."""
-    h = np.asarray(size, dtype=float) / 2
-    c = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)]) * h
-    faces = [(0, 1, 3), (0, 3, 2), (4, 6, 7), (4, 7, 5), (0, 4, 5), (0, 5, 1),
-             (2, 3, 7), (2, 7, 6), (0, 2, 6), (0, 6, 4), (1, 5, 7), (1, 7, 3)]
-    out = [b"\0" * 80, struct.pack("<I", len(faces))]
-    for f in faces:
-        a, b, d = c[list(f)]
-        n = np.cross(b - a, d - a)
-        n /= np.linalg.norm(n)
-        if n @ (a + b + d) < 0:  # outward
-            b, d, n = d, b, -n
-        out.append(struct.pack("<12fH", *n, *a, *b, *d, 0))
-    path.write_bytes(b"".join(out))
-
-
 def _package(root: Path) -> Path:
-    """The A3-like URDF twin as a vendor ships it: a ROS package (package.xml) whose URDF
-    names its collision meshes (STL boxes, the twin's sole boxes) and COLLADA visual
-    meshes by `package://` URIs, the leg map in the package's config folder. Returns the
-    leg map's path."""
-    twin = root / "twin"
-    legmap = yaml.safe_load(write_urdf_robot(A3, twin).read_text())
-    pkg = root / "src" / PKG
-    for sub in ("urdf", "meshes", "config"):
-        (pkg / sub).mkdir(parents=True)
-    (pkg / "package.xml").write_text(f'<?xml version="1.0"?>\n<package format="3"><name>{PKG}</name>'
-                                     "<version>0.1.0</version></package>\n")
-    tree = ET.parse(twin / legmap["urdf"])
-    for link in tree.getroot().iter("link"):
-        for col in link.findall("collision"):
-            box = col.find("geometry/box")
-            mesh = f"meshes/{link.get('name')}.stl"
-            _box_stl(pkg / mesh, [float(x) for x in box.get("size").split()])
-            geometry = col.find("geometry")
-            geometry.remove(box)
-            ET.SubElement(geometry, "mesh", filename=f"package://{PKG}/{mesh}")
-            visual = ET.SubElement(link, "visual")  # a COLLADA mesh MuJoCo cannot read: never opened
-            ET.SubElement(ET.SubElement(visual, "geometry"), "mesh", filename=f"package://{PKG}/meshes/foot.dae")
-    tree.write(pkg / "urdf" / "a3.urdf")
-    legmap["urdf"] = "../urdf/a3.urdf"
-    (pkg / "config" / "a3.legmap.yaml").write_text(yaml.safe_dump(legmap, sort_keys=False))
-    return pkg / "config" / "a3.legmap.yaml"
+    """The A3-like URDF twin as a vendor ships it (`legcal_bench.robots.samples.ros_package`)."""
+    return ros_package(root)
 
 
 def _copy_out(legmap_path: Path, where: Path, **fields) -> Path:
