@@ -49,12 +49,12 @@ def transmissions(legmap: LegMap) -> dict[str, Transmission]:
         out[name] = Transmission(name, 0.0, 1.0 / r)
     legs = set(legmap.joint_names)
     for c in joint_couplings(legmap.mjcf):
-        if c.joint not in legs and c.drive not in legs:
+        if c.joint not in legs:  # no leg joint, or another joint following a leg joint (not held, not ours)
             continue
-        if c.joint not in legs or c.drive in legs:
-            raise LegMapError(f"{where}: the model's joint equality {c.joint} = f({c.drive}) turns leg joint "
-                              f"{c.drive if c.drive in legs else c.joint} from another joint's side: give the "
-                              "equality with the leg joint as joint1 and its drive as joint2")
+        if c.drive in legs:
+            raise LegMapError(f"{where}: the model's joint equality couples two leg joints ({c.joint} = "
+                              f"f({c.drive})): a leg joint is driven by its own motor or by a drive joint off the "
+                              "legs; remove the equality or list the leg's own joints")
         if any(c.polycoef[2:]) or c.polycoef[1] == 0.0:
             raise LegMapError(f"{where}: leg joint {c.joint} is coupled to {c.drive} by a polynomial of degree > 1 "
                               f"(polycoef {list(c.polycoef)}): only a linear transmission (c0 + c1 drive) is read")

@@ -84,3 +84,23 @@ def test_a_nonlinear_coupling_and_walking_a_drive_are_refused(coupled, tmp_path)
 def test_a_ratio_of_zero_is_refused(tmp_path):
     with pytest.raises(LegMapError, match=r"joints\[3\]\.ratio is 0"):
         load_robot(str(a3_variant(tmp_path, ratio={"left_knee_joint": 0.0})))
+
+
+def test_a_joint_following_a_leg_joint_is_neither_held_nor_a_transmission(coupled):
+    """A passive joint the model couples to a leg joint (follower = f(knee)) moves with the
+    leg: not held, and the leg joint keeps its own encoder; two leg joints coupled: refused."""
+    xml_path = coupled.parent / "a3.xml"
+    xml = xml_path.read_text()
+    follower = ('<body name="left_knee_follower" pos="0 0 0"><joint name="left_knee_follower_joint" axis="0 1 0"/>'
+                '<inertial pos="0 0 0" mass="0.05" diaginertia="1e-5 1e-5 1e-5"/></body>\n')
+    anchor = '<body name="left_hip_yaw_rotor"'
+    xml = xml.replace(anchor, follower + anchor, 1).replace(
+        "</equality>", '<joint joint1="left_knee_follower_joint" joint2="left_knee_joint" polycoef="0 2 0 0 0"/>'
+        "</equality>", 1)
+    xml_path.write_text(xml)
+    lm = load_robot(str(coupled))
+    assert set(transmissions(lm)) == {"left_hip_yaw_joint"}
+    assert joint_holds(lm) == ()
+    xml_path.write_text(xml.replace('joint1="left_knee_follower_joint"', 'joint1="left_ankle_pitch_joint"'))
+    with pytest.raises(LegMapError, match="couples two leg joints"):
+        transmissions(load_robot(str(coupled)))
