@@ -87,6 +87,7 @@ from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, po
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.holds import joint_holds
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.robots.transmission import to_joint_space
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
@@ -180,7 +181,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         obs = self.sim.observe(self.np_random)
         if self._information is not None:
             self._information.reset()
-            self._information.add(obs["q_enc"], obs["imu_acc"])
+            self._information.add(to_joint_space(obs["q_enc"], self.sim.legmap), obs["imu_acc"])
         return obs, self._info()
 
     def step(self, action):
@@ -189,7 +190,9 @@ class StaticDoubleSupportEnv(MujocoEnv):
         posture = np.clip(self._action(action), self.action_space.low, self.action_space.high)
         self.sim.step(posture)
         obs = self.sim.observe(self.np_random)
-        reward = self._information.add(obs["q_enc"], obs["imu_acc"]) if self._information is not None else 0.0
+        # the information of joint angles (an encoder behind a transmission reads its motor: converted)
+        reward = (self._information.add(to_joint_space(obs["q_enc"], self.sim.legmap), obs["imu_acc"])
+                  if self._information is not None else 0.0)
         return obs, reward, False, False, self._info()
 
     @property

@@ -214,6 +214,13 @@ class _StaticParts:
         from legcal_bench.sim.offsets import resolve_offsets
         from legcal_bench.sim.sensors import sim_sensors
 
+        from legcal_bench.errors import ConfigError
+        from legcal_bench.robots.transmission import transmissions
+
+        if transmissions(legmap):  # its walking parts would log joint angles beside the static parts' motors'
+            raise ConfigError(f"{legmap.source or legmap.name}: leg joints {sorted(transmissions(legmap))} read "
+                              "their encoders through a transmission: simulate-log does not simulate them yet; "
+                              "collect static sets (`collect`) instead")
         self.cfg = cfg
         self.gains = servo_gains(legmap)
         offsets = resolve_offsets(cfg.offsets, legmap, np.random.default_rng(cfg.seed))

@@ -188,7 +188,7 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
     heights: dict = {k: [] for k in estimates}
     kinds = set()
     for p in paths:
-        rec = load_recording(p, names)
+        (rec,) = in_joint_space([load_recording(p, names)], legmap)
         if rec.kind != "heldout":
             continue
         if truth_path(p).is_file():

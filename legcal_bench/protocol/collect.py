@@ -32,6 +32,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, comm
                                           settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.robots.transmission import encoder_map
 from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
@@ -459,7 +460,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 pelvis_pose_world=tr["pelvis_pose_world"], posture=tr["posture"],
                 posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
                 imu_true_gyro=tr["imu_true_gyro"],
-                q_enc_clean=(tr["q_motor"] - sim.offsets) / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0)),
+                q_enc_clean=clean_encoders(sim, tr["q_motor"]),
                 meta={"session": session, "mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
                       "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),
@@ -497,6 +498,14 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     summary.wall_s = time.perf_counter() - t0
     summary.sim_s = total / cfg.rate_hz
     return summary
+
+
+def clean_encoders(sim: DoubleSupportSim, q_motor: np.ndarray) -> np.ndarray:
+    """The encoders' noise-free readings as the joints' angles (q = c0 + c1 e; `e` read in
+    the encoder's own space, scale error included, as `DoubleSupportSim._sense` reads it)."""
+    c0, c1 = encoder_map(sim.sim_legmap)
+    e = (q_motor - sim.offsets - c0) / c1 / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0))
+    return c0 + c1 * e
 
 
 def format_summary(s: CollectSummary) -> str:

@@ -36,6 +36,7 @@ from legcal_bench.robots.legmap import LegMap
 HOWS = ("rigid", "servo", "free")
 OWN_PREFIX = "legcal_"  # joints legcal-bench adds to a model (a series spring): the effect's, not held
 PATTERN_CHARS = "*?["
+RANGE_SLACK_RAD = 1e-9  # a hold at a limit is inside it
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class JointHold:
     how: str  # one of HOWS
     kp: float | None = None  # servo holds: N m/rad (or N/m for a slide joint)
     kd: float | None = None
+    ref: float = 0.0  # the joint's reference (qpos0): MuJoCo's joint equality holds angle - ref
 
     def to_dict(self) -> dict:
         d = {"joint": self.joint, "angle_deg": float(np.rad2deg(self.angle_rad)), "from": self.source,
@@ -63,6 +65,7 @@ class ModelJoint:
     kind: str  # "hinge", "slide", "ball", "free"
     qpos0: float  # hinge and slide joints: the reference; others 0
     keyframe: float | None  # the first keyframe's value, None without keyframes
+    range: tuple[float, float] | None = None  # the joint's limits, None for an unlimited joint
 
 
 @dataclass(frozen=True)
@@ -71,7 +74,16 @@ class Coupling:
 
     joint: str
     drive: str
-    polycoef: tuple[float, ...]  # MuJoCo's five coefficients
+    polycoef: tuple[float, ...]  # MuJoCo's five coefficients, of the angles from each joint's reference:
+    refs: tuple[float, float] = (0.0, 0.0)  # joint - ref_joint = poly(drive - ref_drive) (the joints' qpos0)
+
+    @property
+    def linear(self) -> tuple[float, float] | None:
+        """(c0, c1) of joint = c0 + c1 drive, or None for a coupling of higher degree."""
+        a = self.polycoef
+        if any(a[2:]) or a[1] == 0.0:
+            return None
+        return self.refs[0] + a[0] - a[1] * self.refs[1], a[1]
 
 
 def is_pattern(key: str) -> bool:
@@ -100,13 +112,16 @@ def _model_joints(path: str, _stamp: tuple[int, int]) -> tuple[tuple[ModelJoint,
     for j in range(model.njnt):
         adr, kind = int(model.jnt_qposadr[j]), kinds[int(model.jnt_type[j])]
         scalar = kind in ("hinge", "slide")
-        out.append(ModelJoint(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or f"joint {j}", kind,
+        out.append(ModelJoint(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, j) or "", kind,
                               float(model.qpos0[adr]) if scalar else 0.0,
-                              float(model.key_qpos[0, adr]) if scalar and model.nkey else None))
+                              float(model.key_qpos[0, adr]) if scalar and model.nkey else None,
+                              tuple(float(x) for x in model.jnt_range[j]) if model.jnt_limited[j] else None))
     couplings = tuple(
         Coupling(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(model.eq_obj1id[e])),
                  mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, int(model.eq_obj2id[e])),
-                 tuple(float(c) for c in model.eq_data[e, :5]))
+                 tuple(float(c) for c in model.eq_data[e, :5]),
+                 (float(model.qpos0[model.jnt_qposadr[model.eq_obj1id[e]]]),
+                  float(model.qpos0[model.jnt_qposadr[model.eq_obj2id[e]]])))
         for e in range(model.neq)
         if model.eq_type[e] == mujoco.mjtEq.mjEQ_JOINT and model.eq_obj2id[e] >= 0 and model.eq_active0[e])
     return tuple(out), key_name, couplings
@@ -142,11 +157,13 @@ def joint_holds(legmap: LegMap) -> tuple[JointHold, ...]:
         if name not in names:
             raise LegMapError(f"{where}: held_joints_rad.{name}: no joint of that name in {legmap.model_file}; "
                               f"its non-leg joints are {_listing(joints, legs)}")
-    drives = {c.drive for c in joint_couplings(legmap.mjcf) if c.joint in legs} | {
-        c.joint for c in joint_couplings(legmap.mjcf) if c.drive in legs}
-    # A joint coupled to a leg joint moves with it (its drive): holding it would lock the leg.
+    couplings = joint_couplings(legmap.mjcf)
+    # A leg joint's drive moves with the leg (holding it would lock the leg), and a joint
+    # the model couples to another (`joint1` of an equality: a follower, a mimic) moves
+    # with that one: neither is held.
+    moving = {c.drive for c in couplings if c.joint in legs} | {c.joint for c in couplings}
     held = [j for j in joints if j.kind != "free" and j.name not in legs and not j.name.startswith(OWN_PREFIX)
-            and j.name not in drives]
+            and j.name not in moving]
     for key in legmap.servo_gains:
         if key in legs:
             continue
@@ -165,12 +182,17 @@ def joint_holds(legmap: LegMap) -> tuple[JointHold, ...]:
             angle, source = j.keyframe, f"keyframe '{key_name}'"
         else:
             angle, source = j.qpos0, "model's reference (qpos0)"
-        if j.kind == "ball":
-            out.append(JointHold(j.name, 0.0, "model", "free"))
+        if j.kind == "ball" or not j.name:  # a ball joint, or one without a name: nothing can hold it
+            out.append(JointHold(j.name or "(unnamed)", 0.0, "model", "free"))
             continue
+        if j.range is not None and not j.range[0] - RANGE_SLACK_RAD <= angle <= j.range[1] + RANGE_SLACK_RAD:
+            field = f"held_joints_rad.{j.name}" if source == "leg map" else f"{j.name}'s hold ({source})"
+            raise LegMapError(f"{where}: {field} = {angle:+.4f} is outside the joint's range [{j.range[0]:+.4f}, "
+                              f"{j.range[1]:+.4f}]: its limit would fight the hold; give held_joints_rad.{j.name} "
+                              "an angle inside it")
         gains = servo_gains_of(legmap, j.name)
-        out.append(JointHold(j.name, float(angle), source, "servo", *gains) if gains is not None
-                   else JointHold(j.name, float(angle), source, "rigid"))
+        out.append(JointHold(j.name, float(angle), source, "servo", *gains, ref=j.qpos0) if gains is not None
+                   else JointHold(j.name, float(angle), source, "rigid", ref=j.qpos0))
     return tuple(out)
 
 

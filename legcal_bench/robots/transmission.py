@@ -55,13 +55,13 @@ def transmissions(legmap: LegMap) -> dict[str, Transmission]:
             raise LegMapError(f"{where}: the model's joint equality couples two leg joints ({c.joint} = "
                               f"f({c.drive})): a leg joint is driven by its own motor or by a drive joint off the "
                               "legs; remove the equality or list the leg's own joints")
-        if any(c.polycoef[2:]) or c.polycoef[1] == 0.0:
+        if c.linear is None:
             raise LegMapError(f"{where}: leg joint {c.joint} is coupled to {c.drive} by a polynomial of degree > 1 "
                               f"(polycoef {list(c.polycoef)}): only a linear transmission (c0 + c1 drive) is read")
         if c.joint in out:
             raise LegMapError(f"{where}: leg joint {c.joint} has a ratio in the leg map and a drive joint "
                               f"({c.drive}) in the model: the drive's coupling is the transmission; drop the ratio")
-        out[c.joint] = Transmission(c.joint, c.polycoef[0], c.polycoef[1], c.drive)
+        out[c.joint] = Transmission(c.joint, *c.linear, c.drive)  # the joints' references folded in
     return out
 
 

@@ -357,6 +357,8 @@ class DoubleSupportSim:
         a = sc.free_qpos_adr
         d.qpos[a:a + 7] = se3_to_pos_quat(T_WB)
         d.qpos[sc.qpos_adr] = q_true
+        if sc.servo[3] is not None:  # drive joints where their couplings put them: (q - c0) / c1
+            d.qpos[sc.act_qpos_adr] = (q_true - sc.act_c0) / sc.act_c1
         d.qpos[sc.hold_qpos_adr] = sc.hold_angle
 
     def _planned_com(self) -> tuple[float, float]:

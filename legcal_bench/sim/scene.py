@@ -191,7 +191,9 @@ def compose_robot(m: mjcf.RootElement, legmap: LegMap, mode: str, floor: dict | 
     for h in holds:
         _find(m, "joint", h.joint, f"{where}: held joint")
         if h.how == "rigid":
-            m.equality.add("joint", name=f"legcal_hold_{h.joint}", joint1=h.joint, polycoef=[h.angle_rad, 0, 0, 0, 0],
+            # MuJoCo's joint equality holds the angle from the joint's reference: angle - ref
+            m.equality.add("joint", name=f"legcal_hold_{h.joint}", joint1=h.joint,
+                           polycoef=[h.angle_rad - h.ref, 0, 0, 0, 0],
                            solref=list(FLOOR_SOLREF), solimp=list(FLOOR_SOLIMP))
         else:  # a PD servo toward the angle, no ctrl: force = kp (angle - q) - kd qdot
             m.actuator.add("general", name=f"legcal_servo_{h.joint}", joint=h.joint, gainprm=[0.0],

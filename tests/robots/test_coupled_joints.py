@@ -104,3 +104,23 @@ def test_a_joint_following_a_leg_joint_is_neither_held_nor_a_transmission(couple
     xml_path.write_text(xml.replace('joint1="left_knee_follower_joint"', 'joint1="left_ankle_pitch_joint"'))
     with pytest.raises(LegMapError, match="couples two leg joints"):
         transmissions(load_robot(str(coupled)))
+
+
+def test_the_drive_starts_where_its_coupling_puts_it_and_references_fold_into_c0(coupled):
+    """Every reset places the drive at (q - c0) / c1 (a drive left at 0 would be yanked by the
+    equality at every settle); a coupling between joints with references: joint - ref1 =
+    a0 + a1 (drive - ref2), so c0 = ref1 + a0 - a1 ref2."""
+    import pinocchio as pin
+
+    from legcal_bench.robots.holds import Coupling
+    from legcal_bench.sim.double_support import DoubleSupportSim
+    from legcal_bench.sim.sensors import sim_sensors
+
+    lm = load_robot(str(coupled))
+    sim = DoubleSupportSim(lm, "weld", np.zeros(12), sim_sensors("zero"))
+    q = np.zeros(12)
+    q[2] = 0.3  # left hip yaw
+    sim._set_state(q, pin.SE3.Identity())
+    sc = sim.scene
+    assert sim.data.qpos[sc.act_qpos_adr[2]] == pytest.approx(0.6)
+    assert Coupling("j", "d", (0.1, 0.5, 0, 0, 0), (0.2, 0.4)).linear == pytest.approx((0.1, 0.5))

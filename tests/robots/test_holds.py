@@ -115,3 +115,36 @@ def test_weld_collection_holds_every_joint_and_reports_servo_sag(testbot_legmap,
         # the arm (2 kg at 0.15 m, 1.2 kg at ~0.4 m below the shoulder, held 0.3 rad forward) pulls
         # against kp 30 N m/rad: a sag of degrees, far beyond the rigid holds' hundredths
         assert h["sag_deg"] > 1.0, h
+
+
+def test_a_joint_with_a_reference_is_held_at_it_and_unnamed_or_following_joints_are_not_held(testbot_legmap,
+                                                                                              tmp_path):
+    """MuJoCo measures a joint equality from the joint's reference (`ref`, its qpos0): the hold
+    is at the angle, not at ref + angle. A joint without a name cannot be held (free); a
+    joint the model couples to another (joint1 of an equality) follows that one."""
+    lm_path = _variant(testbot_legmap, tmp_path, _drop("left_elbow_joint"))
+    xml = (tmp_path / "testbot.xml").read_text()
+    xml = re.sub(r'(<joint name="left_elbow_joint")', r'\1 ref="-0.2"', xml, count=1)  # in its range [-2.5, 0.1]
+    xml = re.sub(r'(<joint name="right_elbow_joint"[^>]*?)/>',
+                 r'\1/><body name="right_hand" pos="0 0 -0.25"><joint type="hinge" axis="1 0 0"/>'
+                 r'<inertial pos="0 0 0" mass="0.1" diaginertia="1e-4 1e-4 1e-4"/></body>', xml, count=1)
+    xml = xml.replace("</mujoco>", '<equality><joint joint1="right_shoulder_pitch_joint" '
+                      'joint2="left_shoulder_pitch_joint" polycoef="0 1 0 0 0"/></equality>\n</mujoco>')
+    (tmp_path / "testbot.xml").write_text(xml)
+    lm = load_legmap(lm_path)
+    holds = {h.joint: h for h in joint_holds(lm)}
+    assert (holds["left_elbow_joint"].angle_rad, holds["left_elbow_joint"].ref) == (-0.2, -0.2)
+    assert holds["(unnamed)"].how == "free"
+    assert "right_shoulder_pitch_joint" not in holds  # it follows the left one
+    LegKinematics(lm)  # an unnamed joint does not stop the kinematics
+    summary = collect(CollectConfig(robot=str(lm_path), mode="weld", offsets="paper", sensors="zero", seed=0,
+                                    stance_s=1.0, heldout=0, standing_s=0.0), tmp_path / "weld", progress=False)
+    elbow = {h["joint"]: h for h in summary.held_joints}["left_elbow_joint"]
+    assert elbow["within_limit"] and abs(elbow["angle_deg"] - np.rad2deg(-0.2)) < 1e-12, str(elbow)
+
+
+def test_a_hold_outside_the_joints_range_is_refused(testbot_legmap, tmp_path):
+    lm = load_legmap(_variant(testbot_legmap, tmp_path, lambda d: d["held_joints_rad"].update(left_elbow_joint=0.3)))
+    with pytest.raises(LegMapError, match=r"held_joints_rad\.left_elbow_joint = \+0\.3000 is outside the joint's "
+                                          r"range \[-2\.5000, \+0\.1000\]"):
+        joint_holds(lm)
