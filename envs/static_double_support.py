@@ -87,7 +87,7 @@ from legcal_bench.protocol.stances import ALL_STANCES, Placement, fit_stance, po
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.holds import joint_holds
 from legcal_bench.robots.legmap import LegMap
-from legcal_bench.robots.transmission import to_joint_space
+from legcal_bench.robots.transmission import encoder_map, to_joint_space
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
 from legcal_bench.sim.offsets import resolve_offsets
 from legcal_bench.sim.scene import MODES
@@ -153,6 +153,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
             standing_controller=standing_controller(CollectConfig(mode=mode, standing=standing), sim_legmap))
         super().__init__(physics_dt, self.sim.n_substeps, render_mode)
         self.legmap, self.mode = legmap, mode
+        self._encoder_map = encoder_map(legmap)  # the software's reading of encoders behind transmissions
         low, high = posture_bounds(self.sim.nominal.dims)
         self.action_space = spaces.Box(low=low, high=high, dtype=np.float64)
         obs = {
@@ -181,7 +182,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         obs = self.sim.observe(self.np_random)
         if self._information is not None:
             self._information.reset()
-            self._information.add(to_joint_space(obs["q_enc"], self.sim.legmap), obs["imu_acc"])
+            self._information.add(to_joint_space(obs["q_enc"], self._encoder_map), obs["imu_acc"])
         return obs, self._info()
 
     def step(self, action):
@@ -191,7 +192,7 @@ class StaticDoubleSupportEnv(MujocoEnv):
         self.sim.step(posture)
         obs = self.sim.observe(self.np_random)
         # the information of joint angles (an encoder behind a transmission reads its motor: converted)
-        reward = (self._information.add(to_joint_space(obs["q_enc"], self.sim.legmap), obs["imu_acc"])
+        reward = (self._information.add(to_joint_space(obs["q_enc"], self._encoder_map), obs["imu_acc"])
                   if self._information is not None else 0.0)
         return obs, reward, False, False, self._info()
 

@@ -62,25 +62,17 @@ def cmd_verdicts(a: argparse.Namespace) -> int:
 
 def cmd_imu_mount(a: argparse.Namespace) -> int:
     door(a, out=inputs.output_folder, seeds=inputs.seed, workers=inputs.count)
-    from legcal_bench.reports.imu_mount import RATIO_BAR, measure
+    from legcal_bench.reports.imu_mount import measure, summary_lines
 
-    d = measure(a.out, a.robots, a.seeds, workers=a.workers, progress=not a.quiet)
-    print(f"wrote {a.out}/imu_mount.md, .json ({len(d['rows'])} cases)")
-    for robot, s in d["summary"].items():
-        print(f"  {robot}: torso / pelvis {s['torso_over_pelvis']:.2f}x (bar {RATIO_BAR:g}x: "
-              f"{'met' if s['met'] else 'missed'}); undeclared all do-not-apply: {s['undeclared_all_do_not_apply']}")
+    print("\n".join(summary_lines(measure(a.out, a.robots, a.seeds, workers=a.workers, progress=not a.quiet), a.out)))
     return 0
 
 
 def cmd_vendor_cases(a: argparse.Namespace) -> int:
     door(a, out=inputs.output_folder, seeds=inputs.seed, workers=inputs.count)
-    from legcal_bench.reports.vendor_cases import measure
+    from legcal_bench.reports.vendor_cases import measure, summary_lines
 
-    d = measure(a.out, a.cases, a.seeds, workers=a.workers, progress=not a.quiet)
-    print(f"wrote {a.out}/vendor_cases.md, .json ({len(d['rows'])} sets)")
-    for case, s in d["summary"].items():
-        print(f"  {case:<12} zero noise {s['zero_noise_max_deg']:.1e} deg, weld {s['vs_reference']:.2f}x the "
-              f"A3-like robot's ({', '.join(s['verdicts'])})")
+    print("\n".join(summary_lines(measure(a.out, a.cases, a.seeds, workers=a.workers, progress=not a.quiet), a.out)))
     return 0
 
 
@@ -227,6 +219,16 @@ def report_out(command: str) -> str:
     return f"{RUNS}/{command}"
 
 
+def _kept_cases_options(p: argparse.ArgumentParser, command: str, committed: str, what: str, seeds,
+                        seeds_are: str = "collect seeds") -> None:
+    """--seeds, --workers, --out and --quiet of a report whose cases are kept under --out/cases."""
+    p.add_argument("--seeds", nargs="+", type=int, default=list(seeds),
+                   help=f"{seeds_are}, each an integer in [0, 2^32 - 1] (default {' '.join(map(str, seeds))})")
+    pool_options(p, scheduler=False, note=" (default 2)")
+    _out(p, command, committed, what)
+    _quiet(p)
+
+
 def _out(p: argparse.ArgumentParser, command: str, committed: str, what: str) -> None:
     """The --out option of a report command: `runs/<command>` by default; `committed`, the
     report folder the repository keeps, named in the help as the way to update it."""
@@ -322,11 +324,7 @@ def add_commands(sub) -> None:
                     help=f"robots, built-in names or leg maps (default {' '.join(vd.ROBOTS)})")
     vp.add_argument("--modes", nargs="+", default=list(vd.MODES), choices=["kinematic", "weld", "contact"],
                     help=f"floors (default {' '.join(vd.MODES)})")
-    vp.add_argument("--seeds", nargs="+", type=int, default=list(vd.SEEDS),
-                    help="collect seeds, each an integer in [0, 2^32 - 1] (default 0 1 2 3 4 5 6 7 8 9)")
-    vp.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
-    _out(vp, "verdicts", "reports/verdicts", "verdicts.md, verdicts.json and cases/")
-    _quiet(vp)
+    _kept_cases_options(vp, "verdicts", "reports/verdicts", "verdicts.md, verdicts.json and cases/", vd.SEEDS)
     vp.set_defaults(func=cmd_verdicts)
 
     from legcal_bench.reports import imu_mount as im
@@ -342,11 +340,7 @@ def add_commands(sub) -> None:
     ip.add_argument("--robots", nargs="+", default=list(im.ROBOTS), choices=list(im.ROBOTS),
                     help=f"robots (default {' '.join(im.ROBOTS)}: the generated A3-like robot with a 3-joint waist, "
                          "the whole-body G1)")
-    ip.add_argument("--seeds", nargs="+", type=int, default=list(im.SEEDS),
-                    help="collect seeds, each an integer in [0, 2^32 - 1] (default 0 1 2 3 4)")
-    ip.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
-    _out(ip, "imu-mount", "reports/imu_mount", "imu_mount.md, imu_mount.json and cases/")
-    _quiet(ip)
+    _kept_cases_options(ip, "imu-mount", "reports/imu_mount", "imu_mount.md, imu_mount.json and cases/", im.SEEDS)
     ip.set_defaults(func=cmd_imu_mount)
 
     from legcal_bench.reports import vendor_cases as vc
@@ -360,11 +354,8 @@ def add_commands(sub) -> None:
                                     "as it finishes: a stopped run resumes.")
     cp.add_argument("--cases", nargs="+", default=list(vc.CASES), choices=list(vc.CASES),
                     help=f"cases (default {' '.join(vc.CASES)})")
-    cp.add_argument("--seeds", nargs="+", type=int, default=list(vc.SEEDS),
-                    help="weld seeds, each an integer in [0, 2^32 - 1] (default 0 1 2)")
-    cp.add_argument("--workers", type=int, default=2, help="worker processes, at least 1 (default 2)")
-    _out(cp, "vendor-cases", "reports/vendor_cases", "vendor_cases.md, vendor_cases.json and cases/")
-    _quiet(cp)
+    _kept_cases_options(cp, "vendor-cases", "reports/vendor_cases", "vendor_cases.md, vendor_cases.json and cases/",
+                        vc.SEEDS, "weld seeds")
     cp.set_defaults(func=cmd_vendor_cases)
 
     # The cases' and stances' defaults (None here) are filled in by the command from its

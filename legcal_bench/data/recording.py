@@ -29,7 +29,7 @@ from legcal_bench.errors import LegcalError, RecordingError
 from legcal_bench.files.atomic import atomic_write, atomic_write_json
 from legcal_bench.robots.kinematics import joint_limits
 from legcal_bench.robots.legmap import LegMap
-from legcal_bench.robots.transmission import encoder_map
+from legcal_bench.robots.transmission import encoder_map, to_joint_space
 from legcal_bench.sim.sensors import SensorModel
 
 FORMAT = "legcal-recording"
@@ -510,10 +510,8 @@ def in_joint_space(recordings: list[Recording], robot: LegMap) -> list[Recording
     """The recordings with their encoder columns as the joints' angles: a column whose
     encoder reads a motor through a transmission (`legcal_bench.robots.transmission`) is
     converted, q = c0 + c1 e; the others, and robots without transmissions, unchanged."""
-    c0, c1 = encoder_map(robot)
-    if not (c0.any() or (c1 != 1.0).any()):
-        return recordings
-    return [replace(r, q_enc=c0 + c1 * r.q_enc) for r in recordings]
+    emap = encoder_map(robot)
+    return recordings if emap is None else [replace(r, q_enc=to_joint_space(r.q_enc, emap)) for r in recordings]
 
 
 # Encoder angles may pass a joint limit by an offset's size; beyond this they are not radians of that joint.

@@ -212,10 +212,9 @@ class _StaticParts:
         from legcal_bench.protocol.stances import stances_for
         from legcal_bench.sim.double_support import DoubleSupportSim
         from legcal_bench.sim.offsets import resolve_offsets
-        from legcal_bench.sim.sensors import sim_sensors
-
         from legcal_bench.errors import ConfigError
         from legcal_bench.robots.transmission import transmissions
+        from legcal_bench.sim.sensors import sim_sensors
 
         if transmissions(legmap):  # its walking parts would log joint angles beside the static parts' motors'
             raise ConfigError(f"{legmap.source or legmap.name}: leg joints {sorted(transmissions(legmap))} read "

@@ -32,7 +32,7 @@ from legcal_bench.protocol.stances import (ALL_STANCES, check_stance_names, comm
                                           settled_placement, stances_for)
 from legcal_bench.provenance import RESULTS_VERSION, stable_hash
 from legcal_bench.robots.legmap import SIDES, LegMap
-from legcal_bench.robots.transmission import encoder_map
+from legcal_bench.robots.transmission import to_joint_space
 from legcal_bench.sim.arena import floor_parameters
 from legcal_bench.robots import load_robot
 from legcal_bench.sim.double_support import DoubleSupportSim, physics_timing
@@ -501,11 +501,9 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
 
 
 def clean_encoders(sim: DoubleSupportSim, q_motor: np.ndarray) -> np.ndarray:
-    """The encoders' noise-free readings as the joints' angles (q = c0 + c1 e; `e` read in
-    the encoder's own space, scale error included, as `DoubleSupportSim._sense` reads it)."""
-    c0, c1 = encoder_map(sim.sim_legmap)
-    e = (q_motor - sim.offsets - c0) / c1 / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0))
-    return c0 + c1 * e
+    """The encoders' noise-free readings (their scale error included) as the joints' angles."""
+    e = sim.encoder_input(q_motor) / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0))
+    return to_joint_space(e, sim.encoder_map)
 
 
 def format_summary(s: CollectSummary) -> str:
@@ -526,13 +524,11 @@ def format_summary(s: CollectSummary) -> str:
     if s.held_joints:
         rigid = [h for h in s.held_joints if h["how"] == "rigid"]
         servo = [h for h in s.held_joints if h["how"] == "servo"]
-        free = [h["joint"] for h in s.held_joints if h["how"] == "free"]
         worst = max(rigid, key=lambda h: h["error_deg"], default=None)
         lines.append("held joints (not in the leg map's legs): " + "; ".join(filter(None, [
             f"{len(rigid)} rigid (largest departure {worst['error_deg']:.4f} deg, {worst['joint']})" if rigid else "",
             (f"{len(servo)} on servos (sag, deg: "
-             + ", ".join(f"{h['joint']} {h['sag_deg']:.3f}" for h in servo) + ")") if servo else "",
-            f"free (ball joints): {', '.join(free)}" if free else ""])))
+             + ", ".join(f"{h['joint']} {h['sag_deg']:.3f}" for h in servo) + ")") if servo else ""])))
     lines.append(f"{'segment':<12} {'kind':<9} {'stance':<9} {'frames':>6} {'max|gyro|':>10} {'sole drift':>18} "
                  f"{'pelvis':>8} {'fit':>5} {'motion':>6} {f'joint range (deg, min..max over {len(s.joint_names)})':>36}")
     for g in s.segments:

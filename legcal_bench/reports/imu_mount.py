@@ -32,28 +32,21 @@ def twin_legmaps(robot: str, folder: Path) -> dict[str, Path]:
     """The three twins' leg maps of `robot` (one of ROBOTS), written into `folder`."""
     import yaml
 
+    from legcal_bench.robots.samples import imu_twins, torso_imu_twins
+
     folder.mkdir(parents=True, exist_ok=True)
     if robot == "a3_waist":
-        from legcal_bench.robots.samples import torso_imu
-
-        return {twin: torso_imu(folder, twin) for twin in TWINS}
-    if robot == "playground_g1":
-        from legcal_bench.robots import resolve_robot
-
-        src = Path(resolve_robot(G1_EXAMPLE))
-        doc, site, waist = yaml.safe_load(src.read_text()), "imu_in_torso", G1_WAIST
-        doc["mjcf"] = os.path.relpath((src.parent / doc["mjcf"]).resolve(), folder.resolve())
-        pelvis = folder / "playground_g1.legmap.yaml"
-        pelvis.write_text(yaml.safe_dump(doc, sort_keys=False))
-    else:
+        return torso_imu_twins(folder)
+    if robot != "playground_g1":
         raise ValueError(f"robot {robot!r}: one of {ROBOTS}")
-    out = {"pelvis": pelvis}
-    for twin, imu in (("torso", {"site": site, "through": list(waist)}), ("undeclared", {"site": site})):
-        d = dict(doc, name=f"{doc['name']}_{twin}_imu", imu=imu)
-        out[twin] = folder / f"{robot}_{twin}.legmap.yaml"
-        out[twin].write_text(f"# made by legcal-bench imu-mount: {robot} with its IMU in the torso\n"
-                             + yaml.safe_dump(d, sort_keys=False))
-    return out
+    from legcal_bench.robots import resolve_robot
+
+    src = Path(resolve_robot(G1_EXAMPLE))
+    doc = yaml.safe_load(src.read_text())
+    doc["mjcf"] = os.path.relpath((src.parent / doc["mjcf"]).resolve(), folder.resolve())
+    pelvis = folder / "playground_g1.legmap.yaml"
+    pelvis.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return imu_twins(pelvis, "imu_in_torso", G1_WAIST)
 
 
 def run_case(job: tuple[str, str, str, int]) -> dict:
@@ -107,6 +100,16 @@ def summarize(rows: list[dict]) -> dict:
                       "verdicts": {t: sorted({r["verdict"] for r in mine if r["twin"] == t}) for t in TWINS},
                       "undeclared_all_do_not_apply": all(r["verdict"] == "do-not-apply" for r in mine
                                                          if r["twin"] == "undeclared")}
+    return out
+
+
+def summary_lines(data: dict, out) -> list[str]:
+    """What `legcal-bench imu-mount` prints of a measurement."""
+    out = [f"wrote {out}/imu_mount.md, .json ({len(data['rows'])} cases)"]
+    for robot, s in data["summary"].items():
+        out.append(f"  {robot}: torso / pelvis {s['torso_over_pelvis']:.2f}x (bar {RATIO_BAR:g}x: "
+                   f"{'met' if s['met'] else 'missed'}); undeclared all do-not-apply: "
+                   f"{s['undeclared_all_do_not_apply']}")
     return out
 
 

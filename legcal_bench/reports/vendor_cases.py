@@ -98,6 +98,15 @@ def summarize(rows: list[dict]) -> dict:
     return out
 
 
+def summary_lines(data: dict, out) -> list[str]:
+    """What `legcal-bench vendor-cases` prints of a measurement."""
+    out = [f"wrote {out}/vendor_cases.md, .json ({len(data['rows'])} sets)"]
+    for case, s in data["summary"].items():
+        out.append(f"  {case:<12} zero noise {s['zero_noise_max_deg']:.1e} deg, weld {s['vs_reference']:.2f}x the "
+                   f"A3-like robot's ({', '.join(s['verdicts'])})")
+    return out
+
+
 def markdown(summary: dict, made_by: str, code: str) -> str:
     L = ["# Robots as vendors ship them, against the A3-like robot", "", f"Made by `{made_by}` at {code}.", "",
          "Each case runs through its leg map alone (`legcal_bench.robots.samples`). Zero noise: a kinematic set, "

@@ -33,7 +33,6 @@ import numpy as np
 from legcal_bench.errors import LegMapError
 from legcal_bench.robots.legmap import LegMap
 
-HOWS = ("rigid", "servo", "free")
 OWN_PREFIX = "legcal_"  # joints legcal-bench adds to a model (a series spring): the effect's, not held
 PATTERN_CHARS = "*?["
 RANGE_SLACK_RAD = 1e-9  # a hold at a limit is inside it
@@ -46,7 +45,7 @@ class JointHold:
     joint: str
     angle_rad: float
     source: str  # "leg map", "keyframe '<name>'", "model's reference (qpos0)"
-    how: str  # one of HOWS
+    how: str  # "rigid", "servo" or "free" (not held: a ball joint, or one without a name)
     kp: float | None = None  # servo holds: N m/rad (or N/m for a slide joint)
     kd: float | None = None
     ref: float = 0.0  # the joint's reference (qpos0): MuJoCo's joint equality holds angle - ref

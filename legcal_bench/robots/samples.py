@@ -13,8 +13,8 @@ the tests and `legcal-bench vendor-cases` (`legcal_bench.reports.vendor_cases`) 
                    angles are radians);
   roll_first       ankles whose roll comes before their pitch (`ROLL_FIRST_ANKLE`);
   torso_imu        the A3-like robot with a waist of yaw, roll, pitch and its IMU in the
-                   torso above them, declared with `imu.through` (`twin`: the IMU on the
-                   pelvis; `undeclared`: no `through`);
+                   torso above them, declared with `imu.through` (`torso_imu_twins`: with
+                   its twins, the IMU on the pelvis and the torso IMU undeclared);
   drive_joint      the left hip yaw turned by a drive joint at 1:2 (a joint equality);
   fixed_ratio      encoders behind gears: ratio 2 on the left knee, -1.5 on the right
                    ankle pitch (the leg map's `ratio`).
@@ -121,19 +121,28 @@ def roll_first(root: Path) -> Path:
     return write_robot(ROLL_FIRST_ANKLE, Path(root))
 
 
-def torso_imu(root: Path, twin: str = "torso") -> Path:
-    """`twin`: "torso" (declared through the waist), "pelvis" (the IMU on the pelvis),
-    "undeclared" (the torso IMU, no `through`)."""
-    root = Path(root)
-    pelvis = write_robot(DESIGNS["a3"], root, upper_body=True, waist=3)
-    if twin == "pelvis":
-        return pelvis
-    imu = {"site": TORSO_SITE, **({"through": list(WAIST)} if twin == "torso" else {})}
-    d = yaml.safe_load(pelvis.read_text())
-    d.update(name=f"{d['name']}_{twin}_imu", imu=imu)
-    out = root / f"a3_{twin}.legmap.yaml"
-    out.write_text(yaml.safe_dump(d, sort_keys=False))
+def imu_twins(pelvis: Path, site: str, waist) -> dict[str, Path]:
+    """A robot's leg map (IMU on the pelvis) and its torso-IMU twins written beside it:
+    {"pelvis": it, "torso": the IMU on `site` declared through `waist`, "undeclared": on
+    `site`, no `through`}."""
+    pelvis = Path(pelvis)
+    doc = yaml.safe_load(pelvis.read_text())
+    stem = pelvis.name.removesuffix(".legmap.yaml")
+    out = {"pelvis": pelvis}
+    for twin, imu in (("torso", {"site": site, "through": list(waist)}), ("undeclared", {"site": site})):
+        out[twin] = pelvis.parent / f"{stem}_{twin}.legmap.yaml"
+        out[twin].write_text(yaml.safe_dump(dict(doc, name=f"{doc['name']}_{twin}_imu", imu=imu), sort_keys=False))
     return out
+
+
+def torso_imu_twins(root: Path) -> dict[str, Path]:
+    """The A3-like robot with a 3-joint waist: its `imu_twins`."""
+    return imu_twins(write_robot(DESIGNS["a3"], Path(root), upper_body=True, waist=3), TORSO_SITE, WAIST)
+
+
+def torso_imu(root: Path) -> Path:
+    """The A3-like robot's IMU in the torso, declared through its waist."""
+    return torso_imu_twins(root)["torso"]
 
 
 ROTOR = ('<body name="left_hip_yaw_rotor" pos="0 0 -0.05"><joint name="left_hip_yaw_drive" axis="0 0 1" '

@@ -13,13 +13,14 @@ A transmission maps the encoder's (motor's) angle e to the joint's angle q:
 Offsets live where the encoders are: q = c0 + c1 (e + dq_motor), so a joint-space offset
 dq = c1 dq_motor. Recordings hold the encoders' readings (motor space for these joints);
 `legcal_bench.data.recording.load_session` hands them on in joint space
-(`to_joint_space`), every calibrator and check works in joint space, and results report
+(`to_joint_space`, `encoder_map`), every calibrator and check works in joint space, and results report
 the offsets in both (`motor_offsets`). Joints without a transmission: c0 = 0, c1 = 1.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -65,18 +66,30 @@ def transmissions(legmap: LegMap) -> dict[str, Transmission]:
     return out
 
 
-def encoder_map(legmap: LegMap) -> tuple[np.ndarray, np.ndarray]:
-    """(c0, c1), (n,) each in leg-map order: q = c0 + c1 e per leg joint."""
+class EncoderMap(NamedTuple):
+    """q = c0 + c1 e per leg joint, (n,) each in leg-map order."""
+
+    c0: np.ndarray
+    c1: np.ndarray
+
+
+def encoder_map(legmap: LegMap) -> EncoderMap | None:
+    """The robot's encoder map; None when every encoder reads its joint (no arithmetic)."""
     t = transmissions(legmap)
-    c0 = np.array([t[n].c0 if n in t else 0.0 for n in legmap.joint_names])
-    c1 = np.array([t[n].c1 if n in t else 1.0 for n in legmap.joint_names])
-    return c0, c1
+    if not t:
+        return None
+    return EncoderMap(np.array([t[n].c0 if n in t else 0.0 for n in legmap.joint_names]),
+                      np.array([t[n].c1 if n in t else 1.0 for n in legmap.joint_names]))
 
 
-def to_joint_space(q_enc: np.ndarray, legmap: LegMap) -> np.ndarray:
-    """Encoder readings (N, n) -> joint angles (identity without transmissions)."""
-    c0, c1 = encoder_map(legmap)
-    return np.asarray(q_enc) if not (c0.any() or (c1 != 1.0).any()) else c0 + c1 * np.asarray(q_enc)
+def to_joint_space(q_enc: np.ndarray, emap: EncoderMap | None) -> np.ndarray:
+    """Encoder readings (..., n) -> the joints' angles."""
+    return q_enc if emap is None else emap.c0 + emap.c1 * q_enc
+
+
+def to_encoder_space(q: np.ndarray, emap: EncoderMap | None) -> np.ndarray:
+    """The joints' angles (..., n) -> what their encoders read."""
+    return q if emap is None else (q - emap.c0) / emap.c1
 
 
 def motor_offsets(dq: dict[str, float], legmap: LegMap) -> dict[str, float]:

@@ -49,7 +49,7 @@ from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, holdable_postures, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
-from legcal_bench.robots.transmission import encoder_map
+from legcal_bench.robots.transmission import encoder_map, to_encoder_space
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
 from legcal_bench.sim.scene import Scene, ServoGains, apply_servos, build_scene, set_servo_gains
 from legcal_bench.sim.sensors import SimSensors
@@ -179,7 +179,7 @@ class DoubleSupportSim:
                                           self.physics_dt)
             self._plan_data = mujoco.MjData(self.scene.model)  # where the plan puts the centre of mass
         self._R_BI = self.true_kin.T_BI[:3, :3]  # the simulated IMU in the pelvis frame (kinematic mode)
-        self._encoder_map = encoder_map(self.sim_legmap)  # (c0, c1): the joints' angles from their encoders'
+        self.encoder_map = encoder_map(self.sim_legmap)  # encoders behind transmissions (None: none)
         self.left = self.right = None
         self.standing = False
 
@@ -357,8 +357,8 @@ class DoubleSupportSim:
         a = sc.free_qpos_adr
         d.qpos[a:a + 7] = se3_to_pos_quat(T_WB)
         d.qpos[sc.qpos_adr] = q_true
-        if sc.servo[3] is not None:  # drive joints where their couplings put them: (q - c0) / c1
-            d.qpos[sc.act_qpos_adr] = (q_true - sc.act_c0) / sc.act_c1
+        if sc.drive is not None:  # drive joints where their couplings put them: (q - c0) / c1
+            d.qpos[sc.act_qpos_adr] = to_encoder_space(q_true, sc.drive)
         d.qpos[sc.hold_qpos_adr] = sc.hold_angle
 
     def _planned_com(self) -> tuple[float, float]:
@@ -450,6 +450,11 @@ class DoubleSupportSim:
         imu = self.data.sensordata[self._imu_adr]
         return imu[:3], imu[3:]
 
+    def encoder_input(self, q_motor: np.ndarray) -> np.ndarray:
+        """What the encoders see before their own errors: the joint angle less the offset,
+        or behind a transmission the motor's angle, (q - dq - c0) / c1 (its offset dq / c1)."""
+        return to_encoder_space(q_motor - self.offsets, self.encoder_map)
+
     def _sense(self, buf: dict[str, np.ndarray], rng: np.random.Generator) -> dict[str, np.ndarray]:
         """`observe` of every frame recorded in `buf` (`_record`), in one pass: the
         random draws of all frames at once, each frame's in `observe`'s order (IMU 3 + 3,
@@ -458,9 +463,7 @@ class DoubleSupportSim:
         enc = slice(6, 6 + self.legmap.n_joints)  # after the IMU's 3 + 3
         noise = rng.standard_normal((n, enc.stop + (12 if self.has_ft else 0)))
         imu = sen.imu_samples(np.stack([buf["imu_true_acc"], buf["imu_true_gyro"]], axis=1), noise[:, :6])
-        # An encoder behind a transmission reads its motor: e = (q - c0) / c1, its offset dq / c1.
-        c0, c1 = self._encoder_map
-        obs = {"q_enc": sen.encoders((buf["q_motor"] - self.offsets - c0) / c1, rng, noise[:, enc]),
+        obs = {"q_enc": sen.encoders(self.encoder_input(buf["q_motor"]), rng, noise[:, enc]),
                "imu_acc": np.ascontiguousarray(imu[:, 0]), "imu_gyro": np.ascontiguousarray(imu[:, 1])}
         if self.has_ft:
             obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, enc.stop:].reshape(n, 2, 6))
@@ -498,7 +501,8 @@ class DoubleSupportSim:
             buf["pelvis_rot"][i] = d.xmat[b]
             # What the servos are told: the planned target and the standing controller's corrections.
             buf["q_target"][i] = self._target if self.regulator is None else self._target + self.regulator.u
-            buf["held_q"][i] = d.qpos[self.scene.hold_qpos_adr]
+            if self.scene.holds:
+                buf["held_q"][i] = d.qpos[self.scene.hold_qpos_adr]
         if self.has_ft:
             buf["ft"][i] = self.data.sensordata[self._ft_adr]
 

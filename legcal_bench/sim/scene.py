@@ -23,7 +23,7 @@ from legcal_bench.errors import ConfigError, LegMapError
 from legcal_bench.geometry.poses import from_wxyz, wxyz
 from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.holds import JointHold, joint_holds
-from legcal_bench.robots.transmission import transmissions
+from legcal_bench.robots.transmission import EncoderMap, to_encoder_space, transmissions
 from legcal_bench.robots.legmap import CORNER_NAMES, SIDES, FrameSpec, LegMap
 from legcal_bench.sim.arena import FLOOR_SOLIMP, FLOOR_SOLREF, add_floor
 
@@ -76,34 +76,34 @@ class Scene:
     hold_qpos_adr: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))  # (h,) their qpos addresses
     hold_angle: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (h,) what each is held at
     # Per leg joint, the joint its actuator turns (the leg joint, or its drive joint:
-    # `legcal_bench.robots.transmission`) and the map to that joint's angle,
-    # q_leg = act_c0 + act_c1 q_actuated (identity without a drive joint).
+    # `legcal_bench.robots.transmission`; default the leg joints), and the drives' map
+    # q_leg = c0 + c1 q_drive (None without drive joints).
     act_qpos_adr: np.ndarray | None = None
     act_dof_adr: np.ndarray | None = None
-    act_c0: np.ndarray | None = None
-    act_c1: np.ndarray | None = None
+    drive: EncoderMap | None = None
 
     def __post_init__(self):
-        n = len(self.qpos_adr)
         self.act_qpos_adr = self.qpos_adr if self.act_qpos_adr is None else self.act_qpos_adr
         self.act_dof_adr = self.dof_adr if self.act_dof_adr is None else self.act_dof_adr
-        self.act_c0 = np.zeros(n) if self.act_c0 is None else self.act_c0
-        self.act_c1 = np.ones(n) if self.act_c1 is None else self.act_c1
         self._layout()
+
+    @property
+    def drive_gain(self) -> np.ndarray | float:
+        """A leg joint's gains in its actuated joint's space: kp_drive = kp c1^2 (power is conserved)."""
+        return 1.0 if self.drive is None else self.drive.c1 ** 2
 
     def _layout(self) -> None:
         pa, ma = self.position_act >= 0, self.motor_act >= 0
         act, cols = self.position_act[pa], np.flatnonzero(pa)
         # Every leg joint on a position actuator, in order (the common case): ctrl[a:a + n] = target.
         n = len(self.position_act)
-        driven = bool(self.act_c0.any() or (self.act_c1 != 1.0).any())
-        contiguous = not driven and pa.all() and np.array_equal(act, np.arange(act[0], act[0] + n))
-        c2 = self.act_c1 ** 2  # gains in the actuated joint's space: kp_actuated = kp c1^2 (power is conserved)
+        contiguous = self.drive is None and pa.all() and np.array_equal(act, np.arange(act[0], act[0] + n))
+        c2 = self.drive_gain
         self.servo = (
             slice(int(act[0]), int(act[0]) + n) if contiguous else act, None if contiguous else cols,
             (self.motor_act[ma], np.flatnonzero(ma), self.act_qpos_adr[ma], self.act_dof_adr[ma],
              (self.servo_kp * c2)[ma], (self.servo_kd * c2)[ma], self.motor_gear[ma]) if ma.any() else None,
-            (self.act_c0, self.act_c1) if driven else None)
+            self.drive)
 
 
 def _find(model: mjcf.RootElement, kind: str, name: str, where: str):
@@ -258,8 +258,10 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
     for k, name in enumerate(legmap.joint_names):
         a = position_act[k]
         if a < 0 and motor_act[k] < 0:
-            raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF"
-                              + _coupling_hint(legmap, name))
+            raise LegMapError(f"{where}: leg joint '{name}' has neither a position actuator nor a motor in the MJCF" + (
+                f"; it is turned by its drive joint '{drive[name].drive}' (a joint equality in the model), which has "
+                "no actuator either: give the drive a <position> actuator or a <motor>" if name in drive else
+                ": give it a <position> actuator or a <motor> (with servo_gains in the leg map)"))
         if name in legmap.servo_gains and mode != "walking":
             kp[k], kd[k] = legmap.servo_gains[name]
             source.append("leg map")
@@ -286,17 +288,9 @@ def _index(model, legmap, mode, free_name, sole_site, corner_sites, imu_site, ha
         position_act=position_act, motor_act=motor_act, motor_gear=gear, servo_kp=kp, servo_kd=kd,
         servo_source=tuple(source),
         act_qpos_adr=np.array([model.jnt_qposadr[j] for j in actuated]),
-        act_dof_adr=np.array([model.jnt_dofadr[j] for j in actuated]), act_c0=c0, act_c1=c1,
+        act_dof_adr=np.array([model.jnt_dofadr[j] for j in actuated]),
+        drive=EncoderMap(c0, c1) if drive else None,
     )
-
-
-def _coupling_hint(legmap: LegMap, name: str) -> str:
-    """What to give a leg joint no actuator turns."""
-    for t in transmissions(legmap).values():
-        if t.joint == name and t.drive is not None:
-            return (f"; it is turned by its drive joint '{t.drive}' (a joint equality in the model), which has no "
-                    "actuator either: give the drive a <position> actuator or a <motor>")
-    return ": give it a <position> actuator or a <motor> (with servo_gains in the leg map)"
 
 
 def _index_holds(scene: Scene, holds: tuple[JointHold, ...], mute: bool) -> None:
@@ -322,11 +316,10 @@ def set_servo_gains(scene: Scene, kp: np.ndarray, kd: np.ndarray, source: tuple[
     refuses it)."""
     kp, kd = np.asarray(kp, dtype=float), np.asarray(kd, dtype=float)
     m = scene.model
-    c2 = scene.act_c1 ** 2
+    kpa, kda = kp * scene.drive_gain, kd * scene.drive_gain  # in the actuated joints' space
     for k, a in enumerate(scene.position_act):
         if a >= 0 and np.isfinite(kp[k]):
-            kpa, kda = kp[k] * c2[k], kd[k] * c2[k]
-            m.actuator_gainprm[a, 0], m.actuator_biasprm[a, 1], m.actuator_biasprm[a, 2] = kpa, -kpa, -kda
+            m.actuator_gainprm[a, 0], m.actuator_biasprm[a, 1], m.actuator_biasprm[a, 2] = kpa[k], -kpa[k], -kda[k]
     scene.servo_kp, scene.servo_kd, scene.servo_source = kp.copy(), kd.copy(), tuple(source)
     scene._layout()
 
@@ -337,7 +330,7 @@ def apply_servos(scene: Scene, data: mujoco.MjData, target: np.ndarray) -> None:
     step, with the index layout worked out once (`Scene.servo`)."""
     pos_act, pos_cols, motors, driven = scene.servo
     if driven is not None:  # targets of drive joints in their own angle: (q - c0) / c1
-        target = (target - driven[0]) / driven[1]
+        target = to_encoder_space(target, driven)
     if pos_cols is None:
         data.ctrl[pos_act] = target
     elif len(pos_cols):

@@ -11,17 +11,17 @@ from legcal_bench.errors import LegMapError
 from legcal_bench.estimation.checks.imu_mount import imu_mount
 from legcal_bench.estimation.verdict import INVALIDATES, LIMITS
 from legcal_bench.protocol.collect import CollectConfig, collect
-from legcal_bench.reports.imu_mount import twin_legmaps
 from legcal_bench.robots import load_robot
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import load_legmap
+from legcal_bench.robots.samples import torso_imu_twins
 
 WAIST = ["waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint"]
 
 
 @pytest.fixture(scope="module")
 def twins(tmp_path_factory):
-    return twin_legmaps("a3_waist", tmp_path_factory.mktemp("a3_waist"))
+    return torso_imu_twins(tmp_path_factory.mktemp("a3_waist"))
 
 
 def test_the_imu_joints_are_found_and_through_is_checked(twins, tmp_path):
