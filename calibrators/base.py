@@ -31,6 +31,7 @@ from legcal_bench.estimation.verdict import LIMITS, Finding, check_verdict, judg
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import LegMap
+from legcal_bench.robots.linkage import linkage_offsets
 from legcal_bench.robots.transmission import motor_offsets, transmissions
 from legcal_bench.sim.sensors import SensorModel
 
@@ -190,7 +191,8 @@ def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[R
     on (`session_identity`) and gets its verdict (`CalibrationResult.judge`) here."""
     recs = training(recordings)
     evidence: dict = {}
-    recs, motion_warnings = resolve_motion(LegKinematics(robot), recs, evidence)
+    kin = LegKinematics(robot)
+    recs, motion_warnings = resolve_motion(kin, recs, evidence)
     result = calibrator.calibrate(robot, recs)
     result.warnings = [*result.warnings, *motion_warnings, *undeclared_sensor_warnings(recs)]
     result.diagnostics.setdefault("motion", evidence)
@@ -198,6 +200,8 @@ def calibrate_training(calibrator: Calibrator, robot: LegMap, recordings: list[R
     if drives:  # the encoders' own offsets, where a transmission puts them (`legcal_bench.robots.transmission`)
         result.diagnostics["offsets_motor_rad"] = motor_offsets(result.offsets_rad, robot)
         result.diagnostics["transmissions"] = {n: {"c0": t.c0, "c1": t.c1, "kind": t.kind} for n, t in drives.items()}
+    if kin.linkages:  # a linkage ankle's columns are its motors' offsets; the joints' errors they make
+        result.diagnostics["linkages"] = linkage_offsets(result.offsets_rad, kin)
     result.session = session_identity(recs)
     result.judge()
     return result

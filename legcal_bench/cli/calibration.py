@@ -66,10 +66,13 @@ def format_result(result, names: list[str]) -> str:
     c = result.conditioning
     lines = [headline(result.verdict), f"{result.calibrator} on {result.robot}: offsets (deg)"]
     motor, drives = result.diagnostics.get("offsets_motor_rad"), result.diagnostics.get("transmissions", {})
+    linked = {n: (side, lk) for side, lk in result.diagnostics.get("linkages", {}).items() for n in lk["motors"]}
     for n in names:
         lines.append(f"  {n:<28} {np.rad2deg(result.offsets_rad[n]):+8.4f}" + (
             f"   at its encoder (motor side, {drives[n]['kind']}): {np.rad2deg(motor[n]):+8.4f}"
-            if motor and n in drives else ""))
+            if motor and n in drives else
+            f"   {linked[n][1]['motors'][n]} of the {linked[n][0]} linkage ankle; the joint at the ankle's zero "
+            f"{np.rad2deg(linked[n][1]['joint_offsets_at_zero_rad'][n]):+8.4f}" if n in linked else ""))
     if result.pitch_sums_rad:
         ps = result.pitch_sums_rad
         lines.append("pitch sums (deg): " + ", ".join(f"{k} {np.rad2deg(v):+.4f}" for k, v in ps.items()))

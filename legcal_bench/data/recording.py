@@ -27,7 +27,7 @@ import numpy as np
 
 from legcal_bench.errors import LegcalError, RecordingError
 from legcal_bench.files.atomic import atomic_write, atomic_write_json
-from legcal_bench.robots.kinematics import joint_limits
+from legcal_bench.robots.kinematics import LegKinematics, joint_limits
 from legcal_bench.robots.legmap import LegMap
 from legcal_bench.robots.transmission import encoder_map, to_joint_space
 from legcal_bench.sim.sensors import SensorModel
@@ -524,13 +524,27 @@ def check_against_robot(recordings: list[Recording], robot: LegMap) -> None:
         if r.robot != robot.name:
             raise RecordingError(robot_mismatch(r.name, r.robot, robot.name))
     lower, upper = joint_limits(robot)
+    kin = LegKinematics(robot) if any(leg.linkage is not None for leg in robot.legs.values()) else None
+    linkage_cols = {c: list(lk.cols) for lk in (kin.linkages if kin else ()) for c in lk.cols}
     for r in recordings:
-        out = (r.q_enc < lower - LIMIT_SLACK_RAD) | (r.q_enc > upper + LIMIT_SLACK_RAD)
+        q = r.q_enc if kin is None else kin.joint_angles(r.q_enc)  # a linkage ankle's motors, as its joints
+        unreached = ~np.isfinite(q).all(axis=0) & np.isfinite(r.q_enc).all(axis=0)
+        if unreached.any():
+            j = int(np.flatnonzero(unreached)[0])
+            frames = np.flatnonzero(~np.isfinite(q[:, j]))
+            cols = linkage_cols[j]
+            raise RecordingError(
+                f"{r.name}: field 'q_enc', the {robot.side_of(j)} linkage ankle's motors (columns "
+                f"{', '.join(robot.joint_names[c] for c in cols)}): {frames.size} frame(s) (first {frames[0]}) at "
+                f"{np.round(r.q_enc[frames[0], cols], 4).tolist()} rad, which the leg map's linkage cannot reach: "
+                "the motors' columns swapped, degrees, or the linkage's geometry?")
+        out = (q < lower - LIMIT_SLACK_RAD) | (q > upper + LIMIT_SLACK_RAD)
         if out.any():
             j = int(np.flatnonzero(out.any(axis=0))[0])
             frames = np.flatnonzero(out[:, j])
             raise RecordingError(
                 f"{r.name}: field 'q_enc', joint {robot.joint_names[j]}: {frames.size} frame(s) (first {frames[0]}) "
-                f"at {r.q_enc[frames[0], j]:+.3f} rad, beyond its limits [{lower[j]:+.3f}, {upper[j]:+.3f}] rad by more "
+                f"at {q[frames[0], j]:+.3f} rad{' (its motors through the linkage)' if j in linkage_cols else ''}, beyond "
+                f"its limits [{lower[j]:+.3f}, {upper[j]:+.3f}] rad by more "
                 f"than {LIMIT_SLACK_RAD} rad: degrees, a wrapped angle (±2π) or another joint's column? Encoder "
                 "angles must be radians, in the leg map's joint order")

@@ -216,9 +216,12 @@ class _StaticParts:
         from legcal_bench.robots.transmission import transmissions
         from legcal_bench.sim.sensors import sim_sensors
 
-        if transmissions(legmap):  # its walking parts would log joint angles beside the static parts' motors'
-            raise ConfigError(f"{legmap.source or legmap.name}: leg joints {sorted(transmissions(legmap))} read "
-                              "their encoders through a transmission: simulate-log does not simulate them yet; "
+        from legcal_bench.robots.linkage import linked_joints
+
+        moved = sorted(transmissions(legmap)) + linked_joints(legmap)
+        if moved:  # its walking parts would log joint angles beside the static parts' motors'
+            raise ConfigError(f"{legmap.source or legmap.name}: leg joints {moved} read "
+                              "their encoders through a transmission or a linkage: simulate-log does not simulate them yet; "
                               "collect static sets (`collect`) instead")
         self.cfg = cfg
         self.gains = servo_gains(legmap)

@@ -28,7 +28,7 @@ import numpy as np
 
 from legcal_bench.evaluation.metrics import rms
 from legcal_bench.geometry.poses import pos_quat_to_homogeneous
-from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
+from legcal_bench.robots.kinematics import LegKinematics, joint_frame_kinematics
 
 
 def imu_orientation(gravity: np.ndarray, ang_vel: np.ndarray, dt: float, R0: np.ndarray) -> np.ndarray:
@@ -81,7 +81,7 @@ def leg_odometry(kin: LegKinematics, q: np.ndarray, loads: np.ndarray, R_WB: np.
     right), base orientations R_WB (n, 3, 3), the initial base position p0 and, if the
     robot measures it, each sole's centre of pressure (n, 2, 3; sole frame), the
     contact point (else the sole's origin, anchored at each change of stance foot)."""
-    fk = frame_kinematics(kin, q)
+    fk = joint_frame_kinematics(kin, q)
     R_BS, p_BS = np.stack([fk.R_L, fk.R_R]), np.stack([fk.p_L, fk.p_R])  # (2, n, ...)
     n = len(q)
     c = np.zeros((n, 2, 3)) if cop is None else cop

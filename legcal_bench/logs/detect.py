@@ -112,7 +112,7 @@ def frame_signals(a: Aligned, kin: LegKinematics, det: Detection) -> dict:
     """Per-frame quantities the detection thresholds: the inter-foot transform's rates,
     the feet's loads or the flat-ground geometry, and the IMU's motion."""
     t = a.time
-    TL, TR = kin.sole_poses_batch(a.q_enc)
+    TL, TR = kin.sole_poses_batch(kin.joint_angles(a.q_enc))
     C = np.linalg.inv(TL) @ TR
     p, R = C[:, :3, 3], C[:, :3, :3]
     speed = _window_rate(t, p, det.window_s, lambda x, y: np.linalg.norm(x - y, axis=1))
@@ -220,7 +220,7 @@ def _label(segments: list[Segment], p: np.ndarray, q: np.ndarray, kin: LegKinema
     for seg in segments:
         if seg.kind == "stance":
             qm = np.median(q[seg.start:seg.stop], axis=0)
-            TL, TR = kin.sole_poses_batch(qm[None])
+            TL, TR = kin.sole_poses_batch(kin.joint_angles(qm[None]))
             C = np.linalg.inv(TL[0]) @ TR[0]
             for k, (pc, Rc) in enumerate(placements):
                 if (np.linalg.norm(C[:3, 3] - pc) < det.cluster_m

@@ -104,6 +104,8 @@ def check_stance_names(names, where: str = "--stances", catalog: dict | None = N
     from legcal_bench.errors import ConfigError
 
     catalog = ALL_STANCES if catalog is None else catalog
+    if isinstance(names, str) or not isinstance(names, (list, tuple)):
+        raise ConfigError(f"{where} = {names!r}: give the stances as a list of names, e.g. ['I', 'II']")
     bad = [s for s in names if s not in catalog or s == "standing"]
     if bad:
         raise ConfigError(f"{where}: {', '.join(f'stance {b!r}' for b in bad)} not known; use stances from {list(STANCES)}, the load-varied {list(LOAD_STANCES)}, "

@@ -83,7 +83,7 @@ def interfoot_spread(kin: LegKinematics, Q: np.ndarray) -> tuple[float, float]:
     """(translation RMS in m, rotation RMS in rad) of C = T_left^-1 T_right over the rows
     of Q about its mean: translations about their mean, rotations about the intrinsic
     (Frechet) mean's."""
-    T_left, T_right = kin.sole_poses_batch(Q)
+    T_left, T_right = kin.sole_poses_batch(kin.joint_angles(Q))
     C = inverse(T_left) @ T_right
     p = C[:, :3, 3]
     translation = rms(np.linalg.norm(p - p.mean(axis=0), axis=1))

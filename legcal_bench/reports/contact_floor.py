@@ -79,7 +79,7 @@ def without_motion(kin, recs: list, truths: dict, part) -> list:
     """Copies of the stance recordings with `part` (of `PARTS`) of the soles' departure
     taken out of the encoders (`truths`: recording name -> Truth): each leg's joints moved
     by the least-squares change that undoes it (its sole Jacobian at the true angles)."""
-    from legcal_bench.robots.kinematics import frame_kinematics
+    from legcal_bench.robots.kinematics import joint_frame_kinematics
 
     out = copy.deepcopy(recs)
     for r in out:
@@ -87,7 +87,7 @@ def without_motion(kin, recs: list, truths: dict, part) -> list:
         if t is None or r.kind == "standing":
             continue
         undo = part(sole_departure(t))
-        fk = frame_kinematics(kin, np.asarray(t.q_true))
+        fk = joint_frame_kinematics(kin, np.asarray(t.q_true))
         for k, (side, J) in enumerate((("left", fk.J_L), ("right", fk.J_R))):
             cols = kin.legmap.leg_slice(side)
             r.q_enc[:, cols] = r.q_enc[:, cols] - (np.linalg.pinv(J) @ undo[:, k, :, None])[..., 0]

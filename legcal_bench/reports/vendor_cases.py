@@ -2,8 +2,9 @@
 
 Each case of `legcal_bench.robots.samples` (a URDF in a ROS package, an MJCF with
 frames, roll-before-pitch ankles, a torso IMU through a waist, a drive joint, fixed gear
-ratios) runs through its leg map alone: a zero-noise kinematic set (seed 0; the largest
-recovery error, in joint space and at the encoders) and realistic weld sets (the seeds),
+ratios, two-motor linkage ankles) runs through its leg map alone: a zero-noise kinematic
+set (seed 0; the largest recovery error, in joint space and at the encoders; a linkage
+ankle's offsets are its motors' already) and realistic weld sets (the seeds),
 each calibrated by interfoot and scored. The bar (issue #59): zero-noise recovery
 <= 1e-9 deg, and the weld sets' IMU-removed recovery (`vs_imu_vertical`, mean over the
 seeds) within 1.5x of the A3-like robot's on the same seeds.
@@ -16,7 +17,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-CASES = ("ros_package", "framed", "roll_first", "torso_imu", "drive_joint", "fixed_ratio")
+CASES = ("ros_package", "framed", "roll_first", "torso_imu", "drive_joint", "fixed_ratio", "linkage_ankle")
 REFERENCE = "a3"
 SEEDS = (0, 1, 2)
 RATIO_BAR = 1.5

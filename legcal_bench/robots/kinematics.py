@@ -41,6 +41,7 @@ from legcal_bench.geometry.poses import pose_xyz_rpy, posture_pose, posture_pose
 from legcal_bench.robots.holds import hold_angles
 from legcal_bench.robots.design import PITCH_ROLES, ROLE_AXIS, ROLE_AXIS_NAME
 from legcal_bench.robots.legmap import SIDES, FrameSpec, LegMap
+from legcal_bench.robots.linkage import AnkleLinkage
 
 
 @dataclass(frozen=True)
@@ -207,6 +208,7 @@ class LegKinematics:
                               "knee angle (radians) at which the leg is mechanically straight (often 0)")
         self.poe = self._extract_poe()
         self._prepare_batched()
+        self.linkages = self._linkages()  # parallel-linkage ankles (their columns: motor angles)
 
     # MJCF element kind -> Pinocchio frame type (its MJCF parser makes sites operational frames).
     FRAME_TYPES = {"site": pin.FrameType.OP_FRAME, "body": pin.FrameType.BODY}
@@ -289,6 +291,64 @@ class LegKinematics:
                 raise LegMapError(f"{src}: legs.{s}: the leg joints are not all screw (revolute or prismatic) "
                                   "joints; the batched kinematics cannot represent this leg")
         return poe
+
+    def _linkages(self) -> tuple[AnkleLinkage, ...]:
+        """Each leg map linkage ankle in its shank frame (`legcal_bench.robots.linkage`): the
+        ankle joints' axes and the foot's pose at the ankle's zero, from Pinocchio."""
+        m, d, out = self.model, self.data, []
+        if not any(self.legmap.legs[s].linkage is not None for s in SIDES):
+            return ()
+        pin.framesForwardKinematics(m, d, self.q_full(np.zeros(self.n_joints)))
+
+        def body_frame(joint: int) -> int:
+            return next(i for i, f in enumerate(m.frames) if f.parentJoint == joint and f.type == pin.FrameType.BODY)
+
+        for s in SIDES:
+            motors = self.legmap.legs[s].linkage
+            if motors is None:
+                continue
+            where = f"{self.legmap.source or self.legmap.name}: legs.{s}.linkage"
+            cols = tuple(int(c) for c in self.poe[s].cols[-2:])
+            ids = [int(self.leg_joint_ids[c]) for c in cols]
+            ankle = m.frames[body_frame(ids[0])]
+            shank = m.frames[ankle.parentFrame].parentFrame if m.frames[ankle.parentFrame].type == pin.FrameType.JOINT \
+                else body_frame(int(m.parents[ids[0]]))
+            foot = body_frame(ids[1])
+            oMs = d.oMf[shank]
+            axes, points = [], []
+            for k, jid in zip((-2, -1), ids):
+                v, w = self.poe[s].S[k][:3], self.poe[s].S[k][3:]
+                if abs(np.linalg.norm(w) - 1.0) > 1e-9 or abs(w @ v) > 1e-9:
+                    raise LegMapError(f"{where}: ankle joint '{m.names[jid]}' is not a hinge: a linkage turns two "
+                                      "hinges")
+                T = oMs.actInv(d.oMi[jid])
+                axes.append(T.rotation @ w)
+                points.append(T.act(np.cross(w, v)))
+            out.append(AnkleLinkage.build(s, cols, motors, axes, points, oMs.actInv(d.oMf[foot]).homogeneous,
+                                          m.frames[shank].name, m.frames[foot].name, where))
+        return tuple(out)
+
+    def joint_angles(self, Q: np.ndarray) -> np.ndarray:
+        """Recorded angles (N, n) -> the joints' (N, n): a linkage ankle's two columns hold
+        its motors' angles (NaN where the linkage cannot reach them); others are the joints'."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if not self.linkages:
+            return Q
+        q = Q.copy()
+        for lk in self.linkages:
+            q[:, list(lk.cols)] = lk.joints(Q[:, list(lk.cols)])[0]
+        return q
+
+    def recorded_angles(self, q: np.ndarray) -> np.ndarray:
+        """The joints' angles (N, n) -> what the encoders read at zero offsets (a linkage
+        ankle's motors' angles in its columns): `joint_angles`' inverse."""
+        q = np.atleast_2d(np.asarray(q, dtype=float))
+        if not self.linkages:
+            return q
+        Q = q.copy()
+        for lk in self.linkages:
+            Q[:, list(lk.cols)] = lk.motors(q[:, list(lk.cols)])
+        return Q
 
     @staticmethod
     def _poe_poses(poe: dict[str, LegPoE], q: np.ndarray) -> list[np.ndarray]:
@@ -851,7 +911,7 @@ def _reach(kin: LegKinematics, S_L: np.ndarray, S_R: np.ndarray, P: np.ndarray, 
         return C_target @ Exp(x[:, nq:] @ P_slide.T) if slide else C_target
 
     def residuals(x, rows=slice(None)):
-        fk = frame_kinematics(kin, x[:, :nq])
+        fk = joint_frame_kinematics(kin, x[:, :nq])
         T_BL = np.zeros((len(x), 4, 4))
         T_BL[:, :3, :3], T_BL[:, :3, 3], T_BL[:, 3, 3] = fk.R_L, fk.p_L, 1.0
         r = Log(inverse(fk.C) @ targets(x))  # closure error; G dq - P ds = r closes it to first order
@@ -1016,12 +1076,35 @@ class FrameKinematics:
 
 
 def frame_kinematics(kin: LegKinematics, Q: np.ndarray) -> FrameKinematics:
-    """Forward kinematics and sole Jacobians for each row of Q (N, n), all frames at
-    once on the legs' products of exponentials (`LegPoE`).
+    """`joint_frame_kinematics` of recorded angles Q (N, n), the calibration's coordinates:
+    the joints' angles, but a linkage ankle's columns hold its motors' angles
+    (`legcal_bench.robots.linkage`), so G and the sole Jacobians are by the motors' angles
+    there (dq/dm applied): offsets added to Q are the encoders' own."""
+    if not kin.linkages:
+        return joint_frame_kinematics(kin, Q)
+    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    q = Q.copy()
+    D = []
+    for lk in kin.linkages:
+        q[:, list(lk.cols)], d = lk.joints(Q[:, list(lk.cols)])
+        D.append(d)
+    fk = joint_frame_kinematics(kin, q)
+    for lk, d in zip(kin.linkages, D):
+        cols = list(lk.cols)
+        fk.G[:, :, cols] = fk.G[:, :, cols] @ d
+        J = fk.J_L if lk.side == "left" else fk.J_R
+        local = [c - kin.leg_cols[lk.side][0] for c in cols]
+        J[:, :, local] = J[:, :, local] @ d
+    return fk
+
+
+def joint_frame_kinematics(kin: LegKinematics, q: np.ndarray) -> FrameKinematics:
+    """Forward kinematics and sole Jacobians for each row of the joints' angles q (N, n),
+    all frames at once on the legs' products of exponentials (`LegPoE`).
 
     A right perturbation of the sole poses, T_BF(q + d) = T_BF Exp(J_F d), perturbs C
     on the right by G d with G = [-Ad(C^-1) J_L | J_R]."""
-    Q = np.atleast_2d(np.asarray(Q, dtype=float))
+    Q = np.atleast_2d(np.asarray(q, dtype=float))
     n = len(Q)
     nk = kin.leg_joints
     T, C, G = np.empty((2, n, 4, 4)), np.empty((n, 4, 4)), np.empty((n, 6, 2 * nk))

@@ -14,6 +14,7 @@ import numbers
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import numpy as np
 import yaml
 
 from legcal_bench.errors import ConfigError, LegMapError, MissingModelError
@@ -28,7 +29,8 @@ ABSENT_ALLOWED = ("ankle_roll",)
 # The leg map's keys (a closed format: a misspelt key is refused, with the closest named).
 TOP_FIELDS = ("schema", "name", "mjcf", "urdf", "pelvis", "imu", "legs", "knee_straight_rad", "held_joints_rad",
               "servo_gains", "absent_roles", "packages", "policy_imu")
-LEG_FIELDS = ("joints", "sole", "corners", "ft")
+LEG_FIELDS = ("joints", "sole", "corners", "ft", "linkage")
+LINKAGE_MOTOR_FIELDS = ("pivot", "axis", "crank", "rod", "foot")
 FRAME_FIELDS = ("site", "body", "pos", "rpy")
 
 
@@ -63,11 +65,32 @@ class Joint:
 
 
 @dataclass(frozen=True)
+class LinkageMotor:
+    """One motor of a parallel-linkage ankle (`legcal_bench.robots.linkage`): a crank on
+    the shank turning about `axis` through `pivot`, its arm `crank` (from the pivot, at the
+    encoder's zero; its length the crank's), a rod of length `rod` from the crank's tip to
+    `foot` in the foot frame. Shank-frame vectors in the shank frame (m)."""
+
+    pivot: tuple[float, float, float]
+    axis: tuple[float, float, float]
+    crank: tuple[float, float, float]
+    rod: float
+    foot: tuple[float, float, float]
+
+    def to_dict(self) -> dict:
+        return {"pivot": list(self.pivot), "axis": list(self.axis), "crank": list(self.crank), "rod": self.rod,
+                "foot": list(self.foot)}
+
+
+@dataclass(frozen=True)
 class Leg:
     joints: tuple[Joint, ...]
     sole: FrameSpec
     corners: dict[str, tuple[float, float, float]]  # in the sole frame
     ft: FrameSpec | None = None
+    # A two-motor parallel-linkage ankle: the motors whose encoders stand for the ankle's
+    # two joints (the first ankle joint's column holds motor 0, the second's motor 1).
+    linkage: tuple[LinkageMotor, LinkageMotor] | None = None
 
     @property
     def hip_order(self) -> tuple[str, str, str]:
@@ -166,6 +189,8 @@ class LegMap:
             }
             if leg.ft is not None:
                 ld["ft"] = leg.ft.to_dict()
+            if leg.linkage is not None:
+                ld["linkage"] = {"motors": [mo.to_dict() for mo in leg.linkage]}
             d["legs"][side] = ld
         if self.absent_roles:
             d["absent_roles"] = list(self.absent_roles)
@@ -321,7 +346,46 @@ def _leg(ld, side: str, where: str, expected_roles: tuple[str, ...]) -> Leg:
                           + ("" if isinstance(corners_d, dict) else f"; got {shown(corners_d)}"))
     corners = {k: _vec(corners_d[k], f"{lw}.corners.{k}") for k in CORNER_NAMES}
     ft = _frame(ld["ft"], f"{lw}.ft") if ld.get("ft") is not None else None
-    return Leg(tuple(joints), _frame(ld["sole"], f"{lw}.sole"), corners, ft)
+    linkage = _linkage(ld["linkage"], f"{lw}.linkage", joints) if ld.get("linkage") is not None else None
+    return Leg(tuple(joints), _frame(ld["sole"], f"{lw}.sole"), corners, ft, linkage)
+
+
+def _linkage(d, where: str, joints: list[Joint]) -> tuple[LinkageMotor, LinkageMotor]:
+    """A leg's parallel-linkage ankle: {motors: [two motors]}, each {pivot, axis, crank,
+    rod, foot} (see `LinkageMotor`)."""
+    if len(joints) != 6:
+        raise LegMapError(f"{where}: a parallel-linkage ankle turns an ankle pitch and an ankle roll; this leg has "
+                          f"no ankle roll: leave the linkage out")
+    if any(j.ratio != 1.0 for j in joints[-2:]):
+        raise LegMapError(f"{where}: the ankle joints also have a ratio: the linkage is their transmission; drop "
+                          "the ratio")
+    if not isinstance(d, dict) or set(d) != {"motors"} or not isinstance(d["motors"], list) or len(d["motors"]) != 2:
+        raise LegMapError(f"{where}: expected {{motors: [two motors]}}, each {{pivot, axis, crank, rod, foot}} "
+                          f"(docs/leg-map.md, 'Parallel-linkage ankles'); got {shown(d)}")
+    motors = []
+    for i, md in enumerate(d["motors"]):
+        mw = f"{where}.motors[{i}]"
+        if not isinstance(md, dict):
+            raise LegMapError(f"{mw}: expected {{pivot, axis, crank, rod, foot}}, got {shown(md)}")
+        _known(mw, md, LINKAGE_MOTOR_FIELDS)
+        missing = [k for k in LINKAGE_MOTOR_FIELDS if k not in md]
+        if missing:
+            raise LegMapError(f"{mw}: missing {missing} (pivot, axis, crank: [x, y, z] in the shank frame; rod: the "
+                              "rod's length, m; foot: [x, y, z], the rod's end in the foot frame)")
+        axis = np.array(_vec(md["axis"], f"{mw}.axis"))
+        crank = np.array(_vec(md["crank"], f"{mw}.crank"))
+        if np.linalg.norm(axis) < 1e-9 or np.linalg.norm(crank) < 1e-6:
+            raise LegMapError(f"{mw}: axis and crank must be non-zero (the motor's axis; the crank arm, pivot to "
+                              "the rod's joint, m)")
+        axis /= np.linalg.norm(axis)
+        if abs(axis @ crank) > 1e-6 * np.linalg.norm(crank):
+            raise LegMapError(f"{mw}.crank is not perpendicular to the motor's axis (crank . axis = "
+                              f"{axis @ crank:.3g} m): give the crank arm from the pivot, in the plane the crank turns in")
+        motors.append(LinkageMotor(_vec(md["pivot"], f"{mw}.pivot"), tuple(float(x) for x in axis),
+                                   tuple(float(x) for x in crank),
+                                   _number(md["rod"], f"{mw}.rod", "the rod's length, m", low=0.0, low_open=True),
+                                   _vec(md["foot"], f"{mw}.foot")))
+    return motors[0], motors[1]
 
 
 def _optional_mapping(data: dict, key: str, where: str, meaning: str) -> dict:

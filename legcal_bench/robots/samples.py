@@ -17,7 +17,11 @@ the tests and `legcal-bench vendor-cases` (`legcal_bench.reports.vendor_cases`) 
                    its twins, the IMU on the pelvis and the torso IMU undeclared);
   drive_joint      the left hip yaw turned by a drive joint at 1:2 (a joint equality);
   fixed_ratio      encoders behind gears: ratio 2 on the left knee, -1.5 on the right
-                   ankle pitch (the leg map's `ratio`).
+                   ankle pitch (the leg map's `ratio`);
+  linkage_ankle    both ankles turned by two motors on the shank through cranks and rods
+                   (`LINKAGE`, the leg map's `linkage`); `closed_chain` adds the linkage's
+                   bodies and loops to the model (MuJoCo equality constraints), which the
+                   serial model and the calibration do not have.
 """
 
 from __future__ import annotations
@@ -184,10 +188,112 @@ def fixed_ratio(root: Path) -> Path:
     return a3_with_transmissions(root, ratio={"left_knee_joint": 2.0, "right_ankle_pitch_joint": -1.5})
 
 
+# The linkage ankle on the A3-like shank: two motors 0.29 m above the ankle, 0.06 m cranks
+# pointing back, rods straight down to the foot 0.05 m behind the ankle and 0.03 m to
+# either side (at the ankle's zero, the encoders read zero).
+LINKAGE = {"crank": 0.06, "behind": 0.05, "half_width": 0.03, "motor_height": 0.08, "foot_height": 0.02}
+
+
+def linkage_ankle(root: Path) -> Path:
+    import mujoco
+
+    root = Path(root)
+    root.mkdir(parents=True, exist_ok=True)
+    (root / "a3.xml").write_text((ASSETS / "a3.xml").read_text())
+    model = mujoco.MjModel.from_xml_path(str(root / "a3.xml"))
+    d = yaml.safe_load((ASSETS / "a3.legmap.yaml").read_text())
+    d["name"] = "a3_linkage"
+    g = LINKAGE
+    for side in ("left", "right"):
+        ankle, foot = (model.body(f"{side}_ankle_pitch_link"), model.body(f"{side}_foot_link"))
+        if np.any(model.body_quat[[ankle.id, foot.id]] != [1, 0, 0, 0]):
+            raise RuntimeError("the A3-like asset changed: update legcal_bench.robots.samples.linkage_ankle")
+        o = model.body_pos[ankle.id] + model.body_pos[foot.id]  # the foot frame's origin in the shank's
+        motors = []
+        for sign in (1.0, -1.0):
+            at_foot = np.array([-g["behind"], sign * g["half_width"], g["foot_height"]])
+            x0 = o + at_foot
+            pivot = np.array([x0[0] + g["crank"], x0[1], -g["motor_height"]])
+            motors.append({"pivot": [round(float(x), 6) for x in pivot], "axis": [0.0, 1.0, 0.0],
+                           "crank": [-g["crank"], 0.0, 0.0], "rod": round(float(pivot[2] - x0[2]), 6),
+                           "foot": [float(x) for x in at_foot]})
+        d["legs"][side]["linkage"] = {"motors": motors}
+    (root / "a3.legmap.yaml").write_text(yaml.safe_dump(d, sort_keys=False))
+    return root / "a3.legmap.yaml"
+
+
+def closed_chain(legmap_path: Path, motor_angles: dict[str, tuple[float, float]]):
+    """The robot's MuJoCo model with each linkage built in: per motor a crank body on a
+    hinge at the pivot (locked at `motor_angles[side][i]` by a joint equality), a rod body on
+    a ball joint at the crank's tip, its end joined to the foot's attachment by a `connect`
+    equality (both points given by sites); gravity off, the ankle's own actuators removed,
+    the pelvis welded to the world. Returns (model, {side: the ankle's two joint names})."""
+    import mujoco
+
+    from legcal_bench.robots import load_robot
+
+    lm = load_robot(str(legmap_path))
+    spec = mujoco.MjSpec.from_file(str(lm.mjcf))
+    spec.option.gravity = [0.0, 0.0, 0.0]
+    ankles = {}
+    for side in ("left", "right"):
+        leg = lm.legs[side]
+        if leg.linkage is None:
+            continue
+        names = [j.name for j in leg.joints[-2:]]
+        ankles[side] = names
+        for a in list(spec.actuators):
+            if a.target in names:
+                spec.delete(a)
+        first, second = spec.joint(names[0]).parent, spec.joint(names[1]).parent
+        shank = first.parent
+        for i, mo in enumerate(leg.linkage):
+            crank = shank.add_body(name=f"{side}_crank{i}", pos=list(mo.pivot), mass=0.01,
+                                   inertia=[1e-6, 1e-6, 1e-6])
+            crank.add_joint(name=f"{side}_crank{i}_joint", type=mujoco.mjtJoint.mjJNT_HINGE, axis=list(mo.axis),
+                            damping=0.05)
+            rod_dir = np.asarray(mo.pivot) + np.asarray(mo.crank)  # the crank's tip (shank frame)
+            rod = crank.add_body(name=f"{side}_rod{i}", pos=list(mo.crank), mass=0.01, inertia=[1e-6, 1e-6, 1e-6])
+            rod.add_joint(name=f"{side}_rod{i}_ball", type=mujoco.mjtJoint.mjJNT_BALL, damping=0.05)
+            # The rod's end at q = 0: the attachment's place in the shank frame, from the tip.
+            T = _body_offset(spec, shank, second)
+            end = T[:3, :3] @ np.asarray(mo.foot) + T[:3, 3] - rod_dir
+            end *= mo.rod / np.linalg.norm(end)  # the rod's length along that line
+            rod.add_site(name=f"{side}_rod{i}_end", pos=list(end))
+            second.add_site(name=f"{side}_foot{i}", pos=list(mo.foot))
+            eq = spec.add_equality(type=mujoco.mjtEq.mjEQ_CONNECT, objtype=mujoco.mjtObj.mjOBJ_SITE,
+                                   name1=f"{side}_rod{i}_end", name2=f"{side}_foot{i}")
+            eq.solref = [0.005, 1.0]
+            lock = spec.add_equality(type=mujoco.mjtEq.mjEQ_JOINT, name1=f"{side}_crank{i}_joint")
+            lock.data[0] = motor_angles[side][i]
+            lock.solref = [0.005, 1.0]
+    pelvis = spec.body(lm.pelvis)
+    for j in list(pelvis.joints):
+        spec.delete(j)
+    return spec.compile(), ankles
+
+
+def _body_offset(spec, ancestor, body) -> np.ndarray:
+    """`body`'s pose in `ancestor`'s frame at the model's zero (4 x 4), from their positions
+    and orientations in the spec (quaternions w x y z)."""
+    T = np.eye(4)
+    b = body
+    while b.name != ancestor.name:
+        R = np.empty(9)
+        import mujoco
+
+        mujoco.mju_quat2Mat(R, np.asarray(b.quat, dtype=float))
+        A = np.eye(4)
+        A[:3, :3], A[:3, 3] = R.reshape(3, 3), b.pos
+        T = A @ T
+        b = b.parent
+    return T
+
+
 def framed_grouped(root: Path) -> Path:
     """`framed` with frames that carry their bodies' offsets: the A3-like robot, grouped."""
     return framed(root, same_robot=True)
 
 
 SAMPLES = {"ros_package": ros_package, "framed": framed_grouped, "roll_first": roll_first, "torso_imu": torso_imu,
-           "drive_joint": drive_joint, "fixed_ratio": fixed_ratio}
+           "drive_joint": drive_joint, "fixed_ratio": fixed_ratio, "linkage_ankle": linkage_ankle}

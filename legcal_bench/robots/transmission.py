@@ -15,6 +15,8 @@ dq = c1 dq_motor. Recordings hold the encoders' readings (motor space for these 
 `legcal_bench.data.recording.load_session` hands them on in joint space
 (`to_joint_space`, `encoder_map`), every calibrator and check works in joint space, and results report
 the offsets in both (`motor_offsets`). Joints without a transmission: c0 = 0, c1 = 1.
+A parallel-linkage ankle's map is not linear: its motors' angles stay in the recordings'
+columns and the kinematics maps them (`legcal_bench.robots.linkage`).
 """
 
 from __future__ import annotations
@@ -49,9 +51,14 @@ def transmissions(legmap: LegMap) -> dict[str, Transmission]:
     for name, r in ratio.items():
         out[name] = Transmission(name, 0.0, 1.0 / r)
     legs = set(legmap.joint_names)
+    linked = {j.name for s in legmap.legs.values() if s.linkage is not None for j in s.joints[-2:]}
     for c in joint_couplings(legmap.mjcf):
         if c.joint not in legs:  # no leg joint, or another joint following a leg joint (not held, not ours)
             continue
+        if c.joint in linked:
+            raise LegMapError(f"{where}: ankle joint {c.joint} is turned by the leg map's linkage and coupled to "
+                              f"{c.drive} by a joint equality of the model: give one transmission; drop the equality "
+                              "or the linkage")
         if c.drive in legs:
             raise LegMapError(f"{where}: the model's joint equality couples two leg joints ({c.joint} = "
                               f"f({c.drive})): a leg joint is driven by its own motor or by a drive joint off the "

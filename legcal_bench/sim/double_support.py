@@ -47,7 +47,7 @@ from legcal_bench import inputs
 from legcal_bench.errors import ConfigError, IKError, LegMapError
 from legcal_bench.geometry.lie import Log, inverse
 from legcal_bench.geometry.poses import homogeneous_to_pos_quat, posture_pose, posture_poses, se3_to_pos_quat
-from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics, holdable_postures, solve_standing
+from legcal_bench.robots.kinematics import LegKinematics, holdable_postures, joint_frame_kinematics, solve_standing
 from legcal_bench.robots.legmap import SIDES, LegMap
 from legcal_bench.robots.transmission import encoder_map, to_encoder_space
 from legcal_bench.sim.effects import COMPLIANCE_PREFIX, compliance_joints, floor_key
@@ -218,7 +218,7 @@ class DoubleSupportSim:
             self._posture, self._q_stand = posture, q_true
         else:
             q_true, self._posture = self._ik(self.true_kin, np.array(posture, dtype=float), self.true_kin.q_init())
-        self._q_cmd = q_true - self.offsets if standing else self._ik(self.nominal, self._posture, q_true)[0]
+        self._q_cmd = self._command_of(q_true) if standing else self._ik(self.nominal, self._posture, q_true)[0]
         self._q_true = q_true
         if self.mode == "kinematic":
             self._R_WB = posture_pose(self._posture).rotation
@@ -374,7 +374,27 @@ class DoubleSupportSim:
     def _servo_target(self) -> np.ndarray:
         # Standing is the one phase with a physically imposed posture (legs straightened
         # against the mechanism), so its servo target is the true straight-leg posture.
-        return self._q_stand if self.standing else self._q_cmd + self.offsets
+        return self._q_stand if self.standing else self._true_of(self._q_cmd)
+
+    # The offsets are in the calibration's coordinates: the joints' angles, but a linkage
+    # ankle's two columns its motors' (`legcal_bench.robots.linkage`). The robot's software
+    # turns a joint command into motor targets through the nominal linkage; the motors
+    # reach them off by the offsets, and the true linkage turns the joints.
+    def _true_of(self, q_cmd: np.ndarray) -> np.ndarray:
+        """The joints' true angles where the servos hold the command `q_cmd` (n,)."""
+        q = q_cmd + self.offsets
+        for nom, true in zip(self.nominal.linkages, self.true_kin.linkages):
+            c = list(nom.cols)
+            q[c] = true.joints(nom.motors(q_cmd[c][None]) + self.offsets[c])[0][0]
+        return q
+
+    def _command_of(self, q_true: np.ndarray) -> np.ndarray:
+        """`_true_of`'s inverse: the command that holds the joints at `q_true` (n,)."""
+        q = q_true - self.offsets
+        for nom, true in zip(self.nominal.linkages, self.true_kin.linkages):
+            c = list(nom.cols)
+            q[c] = nom.joints(true.motors(q_true[c][None]) - self.offsets[c])[0][0]
+        return q
 
     def _drive(self, targets: np.ndarray) -> None:
         """One physics step per row of `targets` (joint-space servo targets)."""
@@ -452,8 +472,13 @@ class DoubleSupportSim:
 
     def encoder_input(self, q_motor: np.ndarray) -> np.ndarray:
         """What the encoders see before their own errors: the joint angle less the offset,
-        or behind a transmission the motor's angle, (q - dq - c0) / c1 (its offset dq / c1)."""
-        return to_encoder_space(q_motor - self.offsets, self.encoder_map)
+        behind a transmission the motor's angle, (q - dq - c0) / c1 (its offset dq / c1),
+        and a linkage ankle's motors' angles less their offsets."""
+        e = to_encoder_space(q_motor - self.offsets, self.encoder_map)
+        for lk in self.true_kin.linkages:
+            c = list(lk.cols)
+            e[..., c] = lk.motors(np.atleast_2d(q_motor[..., c])).reshape(e[..., c].shape) - self.offsets[c]
+        return e
 
     def _sense(self, buf: dict[str, np.ndarray], rng: np.random.Generator) -> dict[str, np.ndarray]:
         """`observe` of every frame recorded in `buf` (`_record`), in one pass: the
@@ -564,7 +589,7 @@ class DoubleSupportSim:
         by_left, by_right = (soles[:, 0] @ inverse(T_left))[:, :3, 3], (soles[:, 1] @ inverse(T_right))[:, :3, 3]
         predicted = (by_left + by_right) / 2
         # The compromise: min (q - q_t)' K (q - q_t) with C(q) = the soles' actual transform.
-        fk = frame_kinematics(self.true_kin, q_t)
+        fk = joint_frame_kinematics(self.true_kin, q_t)
         r = Log(inverse(fk.C) @ (inverse(soles[:, 0]) @ soles[:, 1]))
         Kinv_Gt = np.swapaxes(fk.G, 1, 2) / self.scene.servo_kp[None, :, None]
         dq = (Kinv_Gt @ np.linalg.solve(fk.G @ Kinv_Gt, r[..., None]))[..., 0]

@@ -131,12 +131,12 @@ class CopRegulator:
         """Start from no correction, the centre of pressure at `com_ref`; the maps from sole
         and pelvis motion to joints at angles `q` (n,), the soles' world orientations
         `sole_rotations` (2, 3, 3)."""
-        from legcal_bench.robots.kinematics import frame_kinematics
+        from legcal_bench.robots.kinematics import joint_frame_kinematics
 
         self.u[:] = 0.0
         self.tick = 0
         self.cop = self.com_ref
-        fk = frame_kinematics(self.kin, np.asarray(q, dtype=float)[None])
+        fk = joint_frame_kinematics(self.kin, np.asarray(q, dtype=float)[None])
         n = len(self.u)
         self.drive_map = np.zeros((n, 12))
         rotation_map, shear_map, pelvis_map = self.drive_map[:, :4], self.drive_map[:, 4:10], self.drive_map[:, 10:]

@@ -50,6 +50,7 @@ from legcal_bench.errors import ConfigError
 from legcal_bench.robots.frames import mjcf_element
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.robots.legmap import SIDES, LegMap
+from legcal_bench.robots.linkage import linked_joints
 from legcal_bench.robots.transmission import transmissions
 from legcal_bench.sim.orientation import GravityFilter
 from legcal_bench.sim.scene import Scene, compose_robot
@@ -136,6 +137,10 @@ def build_walking_scene(legmap: LegMap, cfg: WalkingConfig) -> Scene:
         raise ConfigError(f"{legmap.source or legmap.name}: leg joints {driven} are turned by drive joints (joint "
                           "equalities in the model): walking does not simulate drive joints yet (static collection "
                           "does); walk a model whose leg joints carry their actuators")
+    if linked_joints(legmap):
+        raise ConfigError(f"{legmap.source or legmap.name}: ankle joints {linked_joints(legmap)} are turned by a "
+                          "linkage (legs.<side>.linkage): walking does not simulate linkage ankles yet (static "
+                          "collection does); walk the model without the leg map's linkage")
     m = mjcf_element(legmap.mjcf)
     m.option.timestep = cfg.physics_dt
     if cfg.integrator is not None:

@@ -194,6 +194,11 @@ class EffectModel:
                 imu.append((sl, np.asarray(ax, dtype=float)))
             col = sl.stop
         self.n = col
+        if factors and self.kin.linkages:
+            raise LegMapError(f"{self.kin.legmap.source or self.kin.legmap.name}: geometry effects "
+                              f"({', '.join(e.name for e in self.effects if e.factors(self.kin))}) move the legs' "
+                              "joints, and this robot's linkage ankles are read through their motors: the model gap "
+                              "does not fit geometry on linkage ankles yet; try the effects of sensors and joints")
         self.chain = FactorChain(self.kin, factors, self.n - self.n_offsets) if factors else None
         self.imu = imu
 
