@@ -21,13 +21,14 @@ import json
 from pathlib import Path
 
 from legcal_bench.benchmark.plan import calibrator_variants
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 from legcal_bench.evaluation.closed_loop import ClosedLoopConfig, evaluate
+from legcal_bench.files.examples import example
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.provenance import RESULTS_VERSION, code_version, stable_hash
 
 # robot -> its walking policy (a shipped policy's name, or a spec path relative to the checkout)
-CLOSED_LOOP_ROBOTS = {"a3": "a3", "a2": "a2", G1_EXAMPLE: "examples/unitree_g1.policy.yaml"}
+CLOSED_LOOP_ROBOTS = {"a3": "a3", "a2": "a2", EXTERNAL_ROBOT: example("external_robot", "policy")}
 CLOSED_LOOP_OFFSETS = ("paper@3", "random:3")
 PRIMARY = ("interfoot", "sensor")  # the variant whose walks the report's "corrected" row shows
 RESULTS_DIR = "closed_loop"

@@ -34,7 +34,7 @@ report (`markdown`) adds issue #41's done-when statistics (`done_when`): per rob
 clean floor (median offsets error of its clean cases), per outside edit the verdicts
 and the share of recommended offsets within FLOOR_FACTOR x that floor (the cases beyond
 listed with what the diagnosis said), and each library effect's attribution per robot.
-E.g. `legcal-bench bench --suite modelgap --robots a3 a2 examples/unitree_g1.legmap.yaml
+E.g. `legcal-bench bench --suite modelgap --robots a3 a2 <a leg map>
 --cases clean outside --seeds 10` (20 clean and 10 per edit on each robot) and
 `... --cases clean library --effect-seeds 20`.
 
@@ -82,27 +82,25 @@ OUTSIDE = {
 }
 OUTSIDE_FAMILY = {"hip_mount_moved": "mounting point", "ankle_axes_distance": "axis offset", "shank_bent": "axis offset",
                   "shank_twisted": "axis direction", "knee_axis_tilted": "axis direction"}
-# Their sizes per robot (`robot_label`; another robot takes the A3-like's): plausible
-# manufacturing and assembly errors that still move the offsets estimate. Lengths
-# (hip pitch axis to ankle pitch axis, the shank knee to ankle): A3-like 0.83 m (shank
-# 0.37), A2-like 0.93 m (0.39), G1 0.68 m (0.30). A length error of a part grows with the
-# part (ISO 2768's classes do), so the mm that tilt the leg as a whole are scaled to
-# the G1's shorter leg, keeping the angle they make: the hip's mount 4 mm (~0.3 deg over
-# the leg; a bracket on slotted holes, or after a repair), 3 mm on the G1; the shank
-# bent 3 mm at the ankle (0.46 deg over 0.37 m, a bonded tube's misalignment), 2.5 mm
-# on the G1's 0.30 m (0.48 deg). The ankle's axes 12, 13 and 17.6 mm apart: 1.5, 1.5 and
-# 2 mm closer (~12 %: a bearing seat or a cross from another revision; 3 mm, the size
-# issue #41 measured, is a quarter of the A3-like's). Angles do not scale: the shank
-# twisted by 1 deg, the knee's axis tilted by 0.5 deg (a bearing seat's misalignment).
-# At these sizes the offsets-only estimate is 0.1-0.3 deg off where the clean floor is
-# ~0.003 deg (`run_case`'s offsets_rms_deg "before", one seed a robot and edit).
+# Their sizes per robot (`robot_label`; an example robot's from its `modelgap_outside` in
+# examples/cases.yaml; another robot takes the A3-like's): plausible manufacturing and
+# assembly errors that still move the offsets estimate. Lengths (hip pitch axis to ankle
+# pitch axis, the shank knee to ankle): A3-like 0.83 m (shank 0.37), A2-like 0.93 m
+# (0.39). A length error of a part grows with the part (ISO 2768's classes do), so the mm
+# that tilt the leg as a whole are scaled to a shorter leg, keeping the angle they make:
+# the hip's mount 4 mm (~0.3 deg over the leg; a bracket on slotted holes, or after a
+# repair); the shank bent 3 mm at the ankle (0.46 deg over 0.37 m, a bonded tube's
+# misalignment). The ankle's axes 12 and 13 mm apart: 1.5 mm closer (~12 %: a bearing
+# seat or a cross from another revision; 3 mm, the size issue #41 measured, is a quarter
+# of the A3-like's). Angles do not scale: the shank twisted by 1 deg, the knee's axis
+# tilted by 0.5 deg (a bearing seat's misalignment). At these sizes the offsets-only
+# estimate is 0.1-0.3 deg off where the clean floor is ~0.003 deg (`run_case`'s
+# offsets_rms_deg "before", one seed a robot and edit).
 OUTSIDE_SIZE = {
     "a3": {"hip_mount_moved": 4.0, "ankle_axes_distance": 1.5, "shank_bent": 3.0, "shank_twisted": 1.0,
            "knee_axis_tilted": 0.5},
     "a2": {"hip_mount_moved": 4.0, "ankle_axes_distance": 1.5, "shank_bent": 3.0, "shank_twisted": 1.0,
            "knee_axis_tilted": 0.5},
-    "unitree_g1": {"hip_mount_moved": 3.0, "ankle_axes_distance": 2.0, "shank_bent": 2.5, "shank_twisted": 1.0,
-                   "knee_axis_tilted": 0.5},
 }
 REFERENCE_SCALE = 4.0
 NEAR_SCALES = (0.05, 0.5)  # the near-threshold band: this fraction of a realistic draw (log-uniform)
@@ -155,11 +153,15 @@ def multi_specs(seed: int) -> tuple[str, ...]:
 
 
 def outside_size(robot: str, name: str) -> float:
-    """The size of outside edit `name` on `robot` (a spec or label; `OUTSIDE_SIZE`, the
-    A3-like's for a robot it does not list)."""
+    """The size of outside edit `name` on `robot` (a spec or label): `OUTSIDE_SIZE`'s, an
+    example robot's `modelgap_outside` (examples/cases.yaml), else the A3-like's."""
+    from legcal_bench.files.examples import example, example_roles
     from legcal_bench.robots import robot_label
 
-    return OUTSIDE_SIZE.get(robot_label(robot), OUTSIDE_SIZE["a3"])[name]
+    label = robot_label(robot)
+    examples = {robot_label(example(role)): entry["modelgap_outside"]
+                for role, entry in example_roles().items() if "modelgap_outside" in entry}
+    return (OUTSIDE_SIZE.get(label) or examples.get(label) or OUTSIDE_SIZE["a3"])[name]
 
 
 def outside_spec(name: str, seed: int, scale: float = 1.0, robot: str = "a3") -> tuple[str, str]:

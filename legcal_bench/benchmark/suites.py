@@ -2,7 +2,8 @@
 
 A suite names its robots, floor modes, number of seeds and any collection overrides.
 Robots are references as `legcal_bench.robots.resolve_robot` takes them; a robot whose
-model is missing on this machine (the G1 example outside a checkout with ../shared)
+model is missing on this machine (the external robot example outside a checkout with
+../shared)
 is skipped by the planner with a message naming the path.
 """
 
@@ -11,8 +12,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 from legcal_bench.errors import ConfigError
+from legcal_bench.files.examples import example
 
-G1_EXAMPLE = "examples/unitree_g1.legmap.yaml"
+EXTERNAL_ROBOT = example("external_robot")  # a third-party 12-joint humanoid (examples/cases.yaml)
 
 
 @dataclass(frozen=True)
@@ -33,18 +35,20 @@ SUITES: dict[str, Suite] = {
               ("fast", "static"), "A2-like and A3-like, weld floor, one seed, short sessions (~15 s)"),
         Suite("standard", ("a2", "a3", "pair_ryp", "pair_pry"), ("weld",), 10, {},
               ("static", "leaderboard"), "the built-in robots, weld floor, 10 seeds (~8 min on 2 cores)"),
-        Suite("full", ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE), ("kinematic", "weld", "contact"), 10, {},
+        Suite("full", ("a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT), ("kinematic", "weld", "contact"), 10, {},
               ("static", "leaderboard", "external_robot", "all_floors"),
-              "adds the Unitree G1 through its leg map and the kinematic and contact floors (~30 min)"),
+              "adds the external robot example (a third-party 12-joint humanoid) through its leg map and the "
+              "kinematic and contact floors (~30 min)"),
         # Walking, not static cells: run by `legcal_bench.benchmark.closed_loop` (seeds = trials).
         Suite("closed-loop", ("a3", "a2"), ("walking",), 35, {}, ("closed_loop", "leaderboard"),
               "every calibrator variant's estimate walked by our own policies on the A3-like and A2-like robots at "
               "paper@3 and random:3, 35 trials"),
-        Suite("closed-loop-full", ("a3", "a2", G1_EXAMPLE), ("walking",), 35, {},
+        Suite("closed-loop-full", ("a3", "a2", EXTERNAL_ROBOT), ("walking",), 35, {},
               ("closed_loop", "leaderboard", "external_robot"),
-              "closed-loop, plus the G1 walked by its published policy through its leg map and spec"),
+              "closed-loop, plus the external robot example walked by its published policy through its leg map "
+              "and spec"),
         # The model-gap loop scored: run by `legcal_bench.benchmark.modelgap` (seeds per library effect).
-        Suite("modelgap", ("a3", "a2", G1_EXAMPLE), ("weld",), 10, {}, ("modelgap", "leaderboard", "external_robot"),
+        Suite("modelgap", ("a3", "a2", EXTERNAL_ROBOT), ("weld",), 10, {}, ("modelgap", "leaderboard", "external_robot"),
               "the model-gap loop: each library effect (seeded realistic magnitudes), clean data (false alarms) and "
               "three physical edits outside the library (A3-like), diagnosed (~40 min on 2 cores)"),
     )

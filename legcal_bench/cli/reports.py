@@ -242,7 +242,7 @@ def _quiet(p: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub) -> None:
-    from legcal_bench.benchmark.suites import G1_EXAMPLE
+    from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 
     rp = sub.add_parser("reproduce", help="the paper's experiments side by side with its numbers (markdown report)",
                         description="Collect the simulated data the paper's experiments need (cached under "
@@ -264,7 +264,7 @@ def add_commands(sub) -> None:
                        description="For every robot and floor mode, collect the default session set and report, "
                                    "from the ground truth, the largest sole drift within any segment (mm, deg) and "
                                    "the collection speed (frames per wall second, simulated over wall time).")
-    b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE],
+    b.add_argument("--robots", nargs="+", default=["a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT],
                    help="robots to measure: built-in names or leg-map paths")
     b.add_argument("--modes", nargs="+", default=["kinematic", "weld", "contact"],
                    help="floor modes to measure: kinematic, weld, contact")
@@ -281,8 +281,8 @@ def add_commands(sub) -> None:
                                     "the weld-mode recovery beside the robot's stiff-servo twin, and the data "
                                     "checks' false alarms on these clean sets. Writes the report (markdown and JSON).")
     rc.add_argument("--seeds", type=int, default=2, help="seeds per robot and mode, at least 1 (default 2)")
-    rc.add_argument("--extra", nargs="+", default=[G1_EXAMPLE], help=f"more robots, built-in names or leg-map paths "
-                                                                     f"(default {G1_EXAMPLE})")
+    rc.add_argument("--extra", nargs="+", default=[EXTERNAL_ROBOT], help=f"more robots, built-in names or leg-map paths "
+                                                                     f"(default {EXTERNAL_ROBOT})")
     _out(rc, "robots-check", "reports/robots_check", "the report (markdown and JSON)")
     _quiet(rc)
     rc.set_defaults(func=cmd_robots_check)
@@ -317,7 +317,7 @@ def add_commands(sub) -> None:
                         description="Collect clean realistic-sensor session sets of each robot on each floor, "
                                     "calibrate each with interfoot and count the verdicts (on clean sets every "
                                     "do-not-apply is a false refusal, every review an unearned doubt), and the "
-                                    "whole-body G1 with its IMU in the torso above its undeclared waist (must be "
+                                    "whole-body example with its IMU in the torso above its undeclared waist (must be "
                                     "do-not-apply). Each case is kept under --out/cases as it finishes: a stopped "
                                     "run resumes. Writes verdicts.md and verdicts.json.")
     vp.add_argument("--robots", nargs="+", default=list(vd.ROBOTS),
@@ -339,7 +339,7 @@ def add_commands(sub) -> None:
                                     "Each case is kept under --out/cases as it finishes: a stopped run resumes.")
     ip.add_argument("--robots", nargs="+", default=list(im.ROBOTS), choices=list(im.ROBOTS),
                     help=f"robots (default {' '.join(im.ROBOTS)}: the generated A3-like robot with a 3-joint waist, "
-                         "the whole-body G1)")
+                         "the whole-body example of examples/cases.yaml)")
     _kept_cases_options(ip, "imu-mount", "reports/imu_mount", "imu_mount.md, imu_mount.json and cases/", im.SEEDS)
     ip.set_defaults(func=cmd_imu_mount)
 
@@ -386,8 +386,8 @@ def add_commands(sub) -> None:
              "offsets, per robot, with the standing controller (cop) and without it (none). Writes "
              "contact_holds.md and .json.")):
         t = sub.add_parser(name, help=text, description=description)
-        robots = (["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] if name in ("contact-floor", "contact-holds")
-                  else ["a3", "a2", G1_EXAMPLE])
+        robots = (["a3", "a2", "pair_pry", "pair_ryp", EXTERNAL_ROBOT] if name in ("contact-floor", "contact-holds")
+                  else ["a3", "a2", EXTERNAL_ROBOT])
         if name == "contact-holds":  # the generated robots' names are filled in by the command
             t.add_argument("--robots", nargs="+", default=None,
                            help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design; "

@@ -315,9 +315,11 @@ def add_commands(sub) -> None:
 
 def _walk_options(w: argparse.ArgumentParser) -> None:
     robot_args(w)
+    from legcal_bench.files.examples import example
+
     w.add_argument("--policy", default=None, help="policy spec YAML (see legcal_bench/policies/spec.py; e.g. "
-                                                  "examples/unitree_g1.policy.yaml), or our policy's name (a3, a2); "
-                                                  "no default: give --policy or --teacher")
+                                                  f"{example('external_robot', 'policy')}), or our policy's name "
+                                                  "(a3, a2); no default: give --policy or --teacher")
     w.add_argument("--teacher", default=None, help="instead of a policy: the model-based teacher from its recipe "
                                                    "(e.g. policies/teachers/a3.yaml; default: none, --policy)")
     w.add_argument("--offsets", default="none", help=f"encoder offsets: {PRESETS_HELP}; also paper@<deg>; "

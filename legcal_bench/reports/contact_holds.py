@@ -23,10 +23,10 @@ INJECTED_DEG = 3.0
 
 def default_robots() -> list[str]:
     """The built-ins, the G1 and every generated robot (`legcal_bench.robots.design`)."""
-    from legcal_bench.benchmark.suites import G1_EXAMPLE
+    from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
     from legcal_bench.robots.design import GENERATED, VARIATIONS
 
-    return ["a3", "a2", "pair_pry", "pair_ryp", G1_EXAMPLE] + [d.name for d in (*VARIATIONS, *GENERATED)]
+    return ["a3", "a2", "pair_pry", "pair_ryp", EXTERNAL_ROBOT] + [d.name for d in (*VARIATIONS, *GENERATED)]
 
 
 def offsets_for(legmap, seed: int) -> tuple[float, ...]:

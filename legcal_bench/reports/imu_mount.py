@@ -5,9 +5,9 @@ Two twins per robot, the same model and session settings, the IMU the only diffe
 waist joints, declared with `imu.through`), plus `undeclared` (the torso IMU with no
 `through`: its verdict must be `do-not-apply`). Robots: the generated A3-like robot with
 a 3-joint waist (`legcal_bench.robots.build.build_model(..., upper_body=True,
-waist=3)`; its torso IMU mounted 2 and 3 deg off) and the whole-body G1
-(`examples/playground_g1.legmap.yaml`, its `imu_in_torso` site above waist yaw, roll,
-pitch). Each seed collects realistic weld sets, calibrates them with interfoot and
+waist=3)`; its torso IMU mounted 2 and 3 deg off) and the whole-body example robot (the
+`whole_body` role of examples/cases.yaml: its torso IMU site and the waist joints below
+it). Each seed collects realistic weld sets, calibrates them with interfoot and
 scores them: the IMU-removed recovery (`vs_imu_vertical`) of the torso twin against
 the pelvis twin's (the issue's bar: within 1.5x, mean over the seeds), and the verdicts.
 
@@ -20,12 +20,15 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-ROBOTS = ("a3_waist", "playground_g1")
+from legcal_bench.files.examples import example, example_entry
+
+WHOLE_BODY = example("whole_body")
+WHOLE_BODY_LABEL = Path(WHOLE_BODY).name.removesuffix(".legmap.yaml")
+WHOLE_BODY_WAIST = tuple(example_entry("whole_body")["torso_imu"]["through"])
+ROBOTS = ("a3_waist", WHOLE_BODY_LABEL)
 TWINS = ("pelvis", "torso", "undeclared")
 SEEDS = (0, 1, 2, 3, 4)
 RATIO_BAR = 1.5
-G1_EXAMPLE = "examples/playground_g1.legmap.yaml"
-G1_WAIST = ("waist_yaw_joint", "waist_roll_joint", "waist_pitch_joint")
 
 
 def twin_legmaps(robot: str, folder: Path) -> dict[str, Path]:
@@ -37,16 +40,16 @@ def twin_legmaps(robot: str, folder: Path) -> dict[str, Path]:
     folder.mkdir(parents=True, exist_ok=True)
     if robot == "a3_waist":
         return torso_imu_twins(folder)
-    if robot != "playground_g1":
+    if robot != WHOLE_BODY_LABEL:
         raise ValueError(f"robot {robot!r}: one of {ROBOTS}")
     from legcal_bench.robots import resolve_robot
 
-    src = Path(resolve_robot(G1_EXAMPLE))
+    src = Path(resolve_robot(WHOLE_BODY))
     doc = yaml.safe_load(src.read_text())
     doc["mjcf"] = os.path.relpath((src.parent / doc["mjcf"]).resolve(), folder.resolve())
-    pelvis = folder / "playground_g1.legmap.yaml"
+    pelvis = folder / src.name
     pelvis.write_text(yaml.safe_dump(doc, sort_keys=False))
-    return imu_twins(pelvis, "imu_in_torso", G1_WAIST)
+    return imu_twins(pelvis, example_entry("whole_body")["torso_imu"]["site"], WHOLE_BODY_WAIST)
 
 
 def run_case(job: tuple[str, str, str, int]) -> dict:
@@ -57,7 +60,7 @@ def run_case(job: tuple[str, str, str, int]) -> dict:
     robot, twin, spec, seed = job
     legmap, summary, result, s = calibrated_set(spec, "weld", seed, "imu_mount")
     rec = s["recovery"]
-    waist = [h for h in summary.held_joints if h["joint"] in G1_WAIST]  # the twins' waist (the same names in both robots)
+    waist = [h for h in summary.held_joints if h["joint"] in WHOLE_BODY_WAIST]  # the twins' waist (one naming in both)
     return {"robot": robot, "twin": twin, "seed": seed, "verdict": result.decision,
             "reasons": [r["text"] for r in result.verdict["reasons"]],
             "rms_error_deg": rec["rms_error_deg"], "vs_imu_deg": rec["vs_imu_vertical"]["rms_error_deg"],

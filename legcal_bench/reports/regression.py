@@ -34,7 +34,7 @@ import numpy as np
 
 from legcal_bench.benchmark.plan import plan
 from legcal_bench.benchmark.runner import run
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 from legcal_bench.files.atomic import atomic_write_json
 from legcal_bench.files.scratch import scratch_dir
 from legcal_bench.provenance import code_version
@@ -45,7 +45,7 @@ REL_TOL = 1e-5
 REL_TOL_ALTERNATING = 1e-4  # the zero-noise rows of the paper's alternating solver (see above)
 ABS_TOL = {"deg": 1e-9, "rad": float(np.deg2rad(1e-9)), "mm": 1e-9}
 CELL_ROBOTS = ("a2", "a3")
-ZERO_NOISE_ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE)
+ZERO_NOISE_ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT)
 SOLVERS = ("projected", "alternating")
 
 

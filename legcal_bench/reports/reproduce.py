@@ -15,7 +15,7 @@ import numpy as np
 from tqdm import tqdm
 
 from legcal_bench import paper
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 from legcal_bench.calibrators.base import CalibrationResult, calibrate_training
 from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import load_session
@@ -30,7 +30,7 @@ from legcal_bench.robots.kinematics import LegKinematics, pitch_sums
 from legcal_bench.sim.offsets import paper_injection
 
 SOLVERS = ("alternating", "projected")
-ZERO_NOISE_ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE)
+ZERO_NOISE_ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT)
 
 
 class Reproduction:

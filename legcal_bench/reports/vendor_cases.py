@@ -19,7 +19,11 @@ from pathlib import Path
 
 CASES = ("ros_package", "framed", "roll_first", "torso_imu", "drive_joint", "fixed_ratio", "linkage_ankle")
 REFERENCE = "a3"
-SEEDS = (0, 1, 2)
+# Ten seeds: the A3-like robot's own IMU-removed recovery ranges 0.0011-0.0045 deg over
+# seeds 0-9, so a mean over three seeds (0.0022 at 0-2, 0.0031 at 6-8) moves by 1.4x
+# with the seeds alone and cannot judge a 1.5x bar; at three seeds the linkage ankle read
+# 1.92x, at ten 1.28x (`legcal-bench vendor-cases --seeds 0 1 2` and the default).
+SEEDS = tuple(range(10))
 RATIO_BAR = 1.5
 ZERO_NOISE_BAR_DEG = 1e-9
 

@@ -3,8 +3,8 @@
 Clean realistic session sets of each robot on the weld and the contact floor, each
 calibrated by the inter-foot calibrator: there every `do-not-apply` is a false refusal
 and every `review` a doubt the data did not earn. Beside them the torso-IMU case: the
-whole-body G1 (`examples/playground_g1.legmap.yaml`) with its leg map's IMU moved to
-the model's `imu_in_torso` site, above the waist joints the leg map does not declare
+whole-body example robot (the `whole_body` role of examples/cases.yaml) with its leg
+map's IMU moved to the model's torso IMU site, above the waist joints the leg map does not declare
 (`imu.through`): on a real robot the waist's offsets move that IMU's vertical, unknown to
 the calibration, and its verdict must be `do-not-apply` (the IMU-mount finding,
 `legcal_bench.estimation.checks.imu_mount`; the simulated waist is held, so its offsets
@@ -21,38 +21,40 @@ import os
 from collections import Counter
 from pathlib import Path
 
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
+from legcal_bench.files.examples import example, example_entry
 
-PLAYGROUND_EXAMPLE = "examples/playground_g1.legmap.yaml"
-ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE, PLAYGROUND_EXAMPLE)
+WHOLE_BODY = example("whole_body")  # a whole-body humanoid with a torso IMU (examples/cases.yaml)
+ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT, WHOLE_BODY)
 MODES = ("weld", "contact")
 SEEDS = tuple(range(10))
 TORSO_IMU = "torso_imu"  # the case's robot label
-TORSO_SITE = "imu_in_torso"
+TORSO_SITE = example_entry("whole_body")["torso_imu"]["site"]
 TORSO_SEEDS = (0, 1, 2)
 APPLY_SHARE = 0.95  # the bar: clean sets get `apply` in at least this share, `do-not-apply` in none
 
 
 def torso_imu_legmap(folder: Path) -> Path:
-    """The whole-body G1's leg map with its IMU on the torso's site and no waist joint
-    among its held joints, written into `folder` (its model path relative to it): what a
-    team writes when its IMU sits in the torso and it declares no waist."""
+    """The whole-body example's leg map with its IMU on the torso's site and no waist
+    joint among its held joints, written into `folder` (its model path relative to it):
+    what a team writes when its IMU sits in the torso and it declares no waist."""
     import yaml
 
     from legcal_bench.robots import resolve_robot
 
-    src = Path(resolve_robot(PLAYGROUND_EXAMPLE))
+    src = Path(resolve_robot(WHOLE_BODY))
     doc = yaml.safe_load(src.read_text())
-    doc["name"] = "playground_g1_torso_imu"
+    doc["name"] = f"{doc['name']}_torso_imu"
     doc["imu"] = {"site": TORSO_SITE}
     # Its waist undeclared (no imu.through) and given no hold angle: held at the model's keyframe (#59).
-    doc["held_joints_rad"] = {k: v for k, v in (doc.get("held_joints_rad") or {}).items() if "waist" not in k}
+    waist = set(example_entry("whole_body")["torso_imu"]["through"])
+    doc["held_joints_rad"] = {k: v for k, v in (doc.get("held_joints_rad") or {}).items() if k not in waist}
     folder.mkdir(parents=True, exist_ok=True)
     # The model's path from the new leg map's folder (a checkout's reports/verdicts/ reaches
     # ../shared the same way on every machine).
     doc["mjcf"] = os.path.relpath((src.parent / doc["mjcf"]).resolve(), folder.resolve())
-    out = folder / "playground_g1_torso_imu.legmap.yaml"
-    out.write_text("# made by legcal-bench verdicts: the whole-body G1 with its IMU in the torso\n"
+    out = folder / f"{doc['name']}.legmap.yaml"
+    out.write_text("# made by legcal-bench verdicts: the whole-body example with its IMU in the torso\n"
                    + yaml.safe_dump(doc, sort_keys=False))
     return out
 
@@ -149,7 +151,7 @@ def markdown(rows: list[dict], made_by: str, code: str) -> str:
     if torso:
         n = Counter(r["verdict"] for r in torso)
         L += ["", "## The torso-IMU case", "",
-              f"The whole-body G1 with its leg map's IMU on `{TORSO_SITE}` (above the undeclared waist), weld floor, "
+              f"The whole-body example with its leg map's IMU on `{TORSO_SITE}` (above the undeclared waist), weld floor, "
               f"seeds {', '.join(str(r['seed']) for r in torso)}: {n['do-not-apply']} of {len(torso)} do-not-apply "
               f"({'met' if n['do-not-apply'] == len(torso) else 'missed'}).", "",
               "| seed | verdict | recovery RMS (deg) | first reason |", "|---:|---|---:|---|"]

@@ -10,7 +10,7 @@ from legcal_bench.benchmark import modelgap as mg
 from legcal_bench.benchmark.modelgap import (LIBRARY, MULTI_COUNT, NEAR_SCALES, OUTSIDE, done_when, jobs,
                                              library_spec, markdown, multi_effects, multi_specs, near_scale,
                                              outside_spec, summarize)
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 from legcal_bench.errors import ConfigError
 from legcal_bench.sim.effects import parse_effect
 
@@ -95,7 +95,7 @@ def test_the_leaderboard_shows_the_suite_from_its_rows(tmp_path):
     assert "| 0/1 | 1 |" in line  # attributed wrongly, with confidence: counted as such
 
 
-@pytest.mark.parametrize("robot", ["a3", "a2", G1_EXAMPLE])
+@pytest.mark.parametrize("robot", ["a3", "a2", EXTERNAL_ROBOT])
 def test_every_outside_edit_applies_on_every_robot_to_the_side_it_names(tmp_path, robot):
     # Joint roles and link chains differ (the A2-like's hip order, the G1's bent thigh):
     # each edit must resolve there, and move that side's sole (at the starting posture)
@@ -122,7 +122,7 @@ def test_every_outside_edit_applies_on_every_robot_to_the_side_it_names(tmp_path
 
 
 def test_outside_sizes_are_per_robot_and_every_robot_runs_the_outside_group_by_default(monkeypatch, tmp_path):
-    assert outside_spec("shank_bent", 0, robot=G1_EXAMPLE)[0] == "link_offset:link=left_shank,axis=y,mm=2.5"
+    assert outside_spec("shank_bent", 0, robot=EXTERNAL_ROBOT)[0] == "link_offset:link=left_shank,axis=y,mm=2.5"
     assert outside_spec("shank_bent", 1, robot="a3") == ("link_offset:link=right_shank,axis=y,mm=3", "right")
     assert outside_spec("shank_bent", 1, mg.REFERENCE_SCALE, "a3")[0].endswith("mm=12")
     assert outside_spec("shank_bent", 0, robot="pair_ryp")[0].endswith("mm=3")  # another robot: the A3-like's
@@ -130,9 +130,9 @@ def test_outside_sizes_are_per_robot_and_every_robot_runs_the_outside_group_by_d
     monkeypatch.setattr(mg, "jobs", lambda robots, seeds, clean_seeds, outside_robots, *a: asked.append(
         outside_robots) or [])
     monkeypatch.setattr(mg, "summarize", lambda rows: [])
-    mg.run(["a3", "a2", G1_EXAMPLE], workers=1, progress=False, out=tmp_path)
-    mg.run(["a3", "a2"], outside_robots=["a2", G1_EXAMPLE], workers=1, progress=False, out=tmp_path)
-    assert asked == [["a3", "a2", G1_EXAMPLE], ["a2"]]
+    mg.run(["a3", "a2", EXTERNAL_ROBOT], workers=1, progress=False, out=tmp_path)
+    mg.run(["a3", "a2"], outside_robots=["a2", EXTERNAL_ROBOT], workers=1, progress=False, out=tmp_path)
+    assert asked == [["a3", "a2", EXTERNAL_ROBOT], ["a2"]]
 
 
 def _case(robot, kind, name, verdict, err, seed=0, selected=(), recommended=None, generic=None):

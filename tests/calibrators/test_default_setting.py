@@ -12,13 +12,13 @@ as a full set's 600 (zero noise: the optimum is the truth at any length; measure
 import numpy as np
 import pytest
 
-from legcal_bench.benchmark.suites import G1_EXAMPLE
+from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
 from legcal_bench.calibrators.base import calibrate_training
 from legcal_bench.calibrators.registry import get_calibrator
 from legcal_bench.data.recording import list_segments, load_session, load_truth
 from legcal_bench.robots import load_robot
 
-ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", G1_EXAMPLE)
+ROBOTS = ("a2", "a3", "pair_ryp", "pair_pry", EXTERNAL_ROBOT)
 
 
 def _error_deg(robot, seed, collected, **options) -> float:

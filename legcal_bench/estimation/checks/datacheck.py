@@ -39,8 +39,8 @@ possible); each names the stance, the channel, the size and the likely cause:
                    (> 0.25 deg) and of each sole's tilt against the IMU's vertical
                    (> 0.5 deg; one sole: that sole lifted; both alike: the IMU moved).
 
-The limits against clean data: `legcal-bench robots-check --seeds 2 --extra
-examples/unitree_g1.legmap.yaml` runs these checks on default sets of the built-ins, the
+The limits against clean data: `legcal-bench robots-check --seeds 2` (its `--extra`, the
+external robot example: the 12-joint G1) runs these checks on default sets of the built-ins, the
 G1 and six generated robots in weld and contact mode (52 sets, paper offsets, realistic
 sensors, with the inter-foot estimate) and raises no warning; the largest figures there
 are identical runs of 7 frames, 1.07 mm dispersion, soles 1.8 mm / 0.46 deg apart, the
