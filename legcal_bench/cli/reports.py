@@ -195,7 +195,7 @@ def cmd_contact_table(a: argparse.Namespace) -> int:
     _table_door(a)
     from legcal_bench.reports import contact_table
 
-    return _cases_report(a, "contact-table", contact_table, contact_table.CASES, "contact_table")
+    return _cases_report(a, "contact-table", contact_table, contact_table.KNOWN_CASES, "contact_table")
 
 
 def cmd_contact_floor(a: argparse.Namespace) -> int:
@@ -371,7 +371,8 @@ def add_commands(sub) -> None:
              "the per-stance contact check measured: clean data, a wedge under one sole in one stance, the "
              "contact floor (flags against the truth)",
              "Measure the inter-foot calibrator's per-stance contact check on clean data, on sets with a wedge "
-             "under one sole in one stance, and on the contact floor, its flags against the truth. Writes "
+             "under one sole in one stance, and on the contact floor, its flags against the truth, with the test's "
+             "chi2/dof; cases ending in ' realistic' use realistic sensors (e.g. 'contact realistic'). Writes "
              "contact_table.md and .json."),
             ("contact-floor", "cases", 5, "leaderboard/contact_floor", cmd_contact_floor,
              "the contact floor against the weld floor (zero and realistic sensors) and its parts",

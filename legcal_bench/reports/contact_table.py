@@ -1,13 +1,16 @@
 """The per-stance contact check measured (issue #16): clean data, a wedge under one sole
 in one stance, and the contact floor, on each robot over seeds.
 
-Cases (weld unless named; `calibrated-imu` sensors, the paper's injection):
+Cases (weld unless named; `calibrated-imu` sensors unless the case ends in `realistic`,
+the paper's injection):
   clean        no effect: every flag is a false alarm;
   wedge 0.3    `shim:side=S,roll=0.3,stance=T`, S and T alternating with the seed: the
                stance T must be flagged, its sole named S;
   wedge 0.05   the same at 0.05 deg (near the check's size floor);
   contact      the contact floor, no effect: the soles really do sit off one plane there
-               (they rock and sink under the load); the truth says by how much.
+               (they rock and sink under the load); the truth says by how much;
+  <case> realistic  any case above with realistic sensors (an uncalibrated IMU:
+               `legcal_bench.sim.sensors`), e.g. `contact realistic` (issue #60).
 Each set is calibrated with `interfoot` (operating setting) with `contact_check=flag`
 (the offsets of `off`) and `contact_check=drop`; a set the robot does not hold
 (HoldError) is counted as failed. Scored: the stances flagged against the
@@ -25,10 +28,18 @@ import numpy as np
 from legcal_bench.files.scratch import scratch_dir
 
 CASES = ("clean", "wedge 0.3", "wedge 0.05", "contact")
+REALISTIC = " realistic"  # a case's suffix: realistic sensors instead of calibrated-imu
+KNOWN_CASES = CASES + tuple(c + REALISTIC for c in CASES)
+
+
+def case_sensors(case: str) -> str:
+    """The sensor preset of `case`."""
+    return "realistic" if case.endswith(REALISTIC) else "calibrated-imu"
 
 
 def case_spec(case: str, seed: int) -> tuple[str, tuple[str, ...], str | None, str | None]:
     """(mode, effect specs, the wedge's stance, its side) of `case` for `seed`."""
+    case = case.removesuffix(REALISTIC)
     side, stance = ("left", "right")[seed % 2], ("II", "III")[(seed // 2) % 2]
     if case.startswith("wedge"):
         deg = case.split()[1]
@@ -69,7 +80,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     mode, effects, stance, side = case_spec(case, seed)
     with scratch_dir("contact") as work:
         try:
-            collect(CollectConfig(robot=robot, mode=mode, sensors="calibrated-imu", seed=seed, effects=effects),
+            collect(CollectConfig(robot=robot, mode=mode, sensors=case_sensors(case), seed=seed, effects=effects),
                     Path(work) / "set", progress=False)
         except HoldError as e:  # a set the robot cannot hold is a failed case, counted, not a crash
             return {"robot": legmap.name, "robot_spec": robot, "case": case, "seed": seed, "mode": mode,
@@ -86,7 +97,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     for c in check:
         t = truth[c["recording"]]
         stances.append({"recording": c["recording"], "flagged": c["flagged"], "sole": c["sole"],
-                        "chi2": c["chi2"], "estimate": [*c["tilt_rad"], c["height_m"]], "truth": t.tolist(),
+                        "chi2": c["chi2"], "dof": c["dof"], "estimate": [*c["tilt_rad"], c["height_m"]], "truth": t.tolist(),
                         "tilt_error_deg": float(np.rad2deg(np.hypot(*(np.subtract(c["tilt_rad"], t[:2]))))),
                         "height_error_mm": float(1e3 * (c["height_m"] - t[2]))})
     err = {o: float(np.rad2deg(rms(np.array([r.offsets_rad[n] for n in legmap.joint_names]) - injected)))
@@ -134,6 +145,14 @@ def summarize(rows: list[dict]) -> list[dict]:
                 if flagged_st else None,
                 "median_abs_height_error_mm": float(np.median([abs(s["height_error_mm"]) for s in flagged_st]))
                 if flagged_st else None,
+                # The test's calibration: its chi2 per dof over the stances (1 where its noise
+                # model holds), and the truth's departure from one plane (RMS over stances).
+                "median_chi2_per_dof": float(np.median([st["chi2"] / st.get("dof", 3) for r in rs
+                                                         for st in r["stances"]])),
+                "true_tilt_rms_deg": float(np.rad2deg(np.sqrt(np.mean([np.sum(np.square(st["truth"][:2])) / 2
+                                                                       for r in rs for st in r["stances"]])))),
+                "true_height_rms_mm": float(1e3 * np.sqrt(np.mean([st["truth"][2] ** 2 for r in rs
+                                                                   for st in r["stances"]]))),
                 "offsets_rms_deg_flag": float(np.mean([r["offsets_rms_deg"]["flag"] for r in rs])),
                 "offsets_rms_deg_drop": float(np.mean([r["offsets_rms_deg"]["drop"] for r in rs])),
             })
@@ -144,23 +163,27 @@ def markdown(data: dict, made_by: str, code: str) -> str:
     from legcal_bench.estimation.checks.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
 
     lines = ["# The per-stance contact check", "",
-             f"Made by `{made_by}` ({code}). `calibrated-imu` sensors, the paper's injection, `interfoot` "
+             f"Made by `{made_by}` ({code}). `calibrated-imu` sensors (`realistic` where the case says so), the "
+             "paper's injection, `interfoot` "
              "(operating setting). Truly off one plane: the simulator's own sole poses put the stance's mean relative "
              f"tilt above {np.rad2deg(MIN_TILT_RAD):.2f} deg or its height above {MIN_HEIGHT_M * 1e3:.1f} mm (the "
              "check's size floor). Errors: the flagged stances' estimated departure against the truth's. Offsets: "
              "RMS error (deg) of the fit with every stance (`contact_check=flag`) and without the flagged ones "
-             "(`drop`), mean over sets.", "",
+             "(`drop`), mean over sets. chi2/dof: the test's median over the stances (about 1 where its noise model "
+             "holds); true departure: the truth's RMS per tilt axis and of the height over the stances.", "",
              "| robot | case | sets | stances | truly off | flagged, truly off | flagged, not off | wedge's sole named "
-             "| median tilt error (deg) | median height error (mm) | offsets flag | offsets drop |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "| median tilt error (deg) | median height error (mm) | chi2/dof | true departure (deg, mm) "
+             "| offsets flag | offsets drop |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in data["summary"]:
         if not s["sets"]:
-            lines.append(f"| {s['robot']} | {s['case']} | 0 ({s['failed']} not held) |" + " – |" * 9)
+            lines.append(f"| {s['robot']} | {s['case']} | 0 ({s['failed']} not held) |" + " – |" * 11)
             continue
         sets = f"{s['sets']}" + (f" (+{s['failed']} not held)" if s["failed"] else "")
         te = "–" if s["median_tilt_error_deg"] is None else f"{s['median_tilt_error_deg']:.4f}"
         he = "–" if s["median_abs_height_error_mm"] is None else f"{s['median_abs_height_error_mm']:.3f}"
         lines.append(f"| {s['robot']} | {s['case']} | {sets} | {s['stances']} | {s['truly_off']} | "
                      f"{s['flagged_truly_off']} | {s['flagged_not_off']} | {s['wedge_sole_named']} | {te} | {he} | "
+                     f"{s['median_chi2_per_dof']:.2f} | {s['true_tilt_rms_deg']:.4f}, {s['true_height_rms_mm']:.3f} | "
                      f"{s['offsets_rms_deg_flag']:.4f} | {s['offsets_rms_deg_drop']:.4f} |")
     return "\n".join(lines) + "\n"
