@@ -99,6 +99,18 @@ def _imu_share(kin: LegKinematics, result: CalibrationResult, truths: dict) -> t
     return tilt, V @ tilt
 
 
+def vs_imu_rms_deg(kin: LegKinematics, result: CalibrationResult, truths: dict) -> float | None:
+    """The offsets' RMS error (deg) with the IMU's realized tilt taken out (`score`'s
+    `vs_imu_vertical`), against `truths` (recording name -> Truth) of the set `result`
+    was calibrated on or of an edit of it; None where the truth or the result lacks the
+    IMU's share."""
+    share = _imu_share(kin, result, truths)
+    if share is None:
+        return None
+    injected = next(iter(truths.values())).offsets
+    return float(np.rad2deg(rms(result.offsets_vector(kin.legmap.joint_names) - injected - share[1])))
+
+
 def score(bags: str, result: CalibrationResult, legmap: LegMap, allow_partial: bool = False) -> dict:
     kin = LegKinematics(legmap)
     names = legmap.joint_names

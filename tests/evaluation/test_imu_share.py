@@ -5,6 +5,8 @@ bound, not the realized tilt."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -83,3 +85,18 @@ def test_paper_base_offsets_are_the_papers_table_by_role(robot, rms_deg):
     # By role: the A3's hip pitch is its first platform column, the A2's hip roll.
     assert v[lm.joint_roles.index("hip_pitch" if robot == "a3" else "hip_roll")] == pytest.approx(
         1.035 if robot == "a3" else 0.430)
+
+
+def test_vs_imu_from_the_truths_is_the_scores(sets):
+    """`vs_imu_rms_deg` (the contact floor's decomposition scores edited recordings with
+    it) is `score`'s `vs_imu_vertical` on the set itself."""
+    from legcal_bench.data.recording import list_segments, load_truth
+    from legcal_bench.evaluation.scoring import vs_imu_rms_deg
+    from legcal_bench.robots.kinematics import LegKinematics
+
+    lm = load_robot("a3")
+    out = sets("a3", "realistic")
+    res = get_calibrator("interfoot", setting="sensor").calibrate(lm, load_session(out, robot=lm))
+    truths = {Path(p).stem: load_truth(p) for p in list_segments(out)}
+    expected = score(str(out), res, lm)["recovery"]["vs_imu_vertical"]["rms_error_deg"]
+    assert vs_imu_rms_deg(LegKinematics(lm), res, truths) == pytest.approx(expected, rel=1e-12)
