@@ -229,7 +229,7 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         if not shares:
             continue
         lines += ["", f"## What the {'zero-noise' if sensors == 'zero' else 'realistic'} contact floor is made of", "",
-                  f"{what} of the {sensors}-sensor contact sets as recorded and with each part of the soles' "
+                  f"{what} of the {'zero-noise' if sensors == 'zero' else 'realistic-sensor'} contact sets as recorded and with each part of the soles' "
                   "departure from lying flat at their mean place taken out of the encoders (each leg's least-squares "
                   "joint change that undoes it, `PARTS`); without every sole motion, what the weld floor has too "
                   "remains (the IMU's motion compensation, the servos" + (", the sensors' noise" if sensors != "zero"

@@ -121,6 +121,8 @@ def build(robots, cases=CASES, seeds: int = 5, workers: int = 2, progress: bool 
 
 
 def summarize(rows: list[dict]) -> list[dict]:
+    from legcal_bench.evaluation.metrics import rms
+
     out = []
     for robot in dict.fromkeys(r["robot"] for r in rows):
         for case in dict.fromkeys(r["case"] for r in rows if r["robot"] == robot):
@@ -149,10 +151,9 @@ def summarize(rows: list[dict]) -> list[dict]:
                 # model holds), and the truth's departure from one plane (RMS over stances).
                 "median_chi2_per_dof": float(np.median([st["chi2"] / st.get("dof", 3) for r in rs
                                                          for st in r["stances"]])),
-                "true_tilt_rms_deg": float(np.rad2deg(np.sqrt(np.mean([np.sum(np.square(st["truth"][:2])) / 2
-                                                                       for r in rs for st in r["stances"]])))),
-                "true_height_rms_mm": float(1e3 * np.sqrt(np.mean([st["truth"][2] ** 2 for r in rs
-                                                                   for st in r["stances"]]))),
+                "true_tilt_rms_deg": float(np.rad2deg(rms(np.array([st["truth"][:2] for r in rs
+                                                                    for st in r["stances"]])))),
+                "true_height_rms_mm": float(1e3 * rms(np.array([st["truth"][2] for r in rs for st in r["stances"]]))),
                 "offsets_rms_deg_flag": float(np.mean([r["offsets_rms_deg"]["flag"] for r in rs])),
                 "offsets_rms_deg_drop": float(np.mean([r["offsets_rms_deg"]["drop"] for r in rs])),
             })
