@@ -163,9 +163,12 @@ def cmd_check(a: argparse.Namespace) -> int:
     kin = LegKinematics(legmap)
     stats = [statistics(kin, r, dq) for r in recs]
     found = data_warnings(kin, recs, dq)
+    contacts, contact_note = _contact_test(legmap, recs, dq)
+    found += [c.text() for c in contacts or [] if c.flagged]
     if a.json:
-        print(json.dumps({"robot": legmap.name, "offsets_from": offsets_from, "recordings": stats, "warnings": found},
-                         indent=2))
+        print(json.dumps({"robot": legmap.name, "offsets_from": offsets_from, "recordings": stats,
+                          "contact_check": None if contacts is None else [c.to_dict() for c in contacts],
+                          "contact_check_note": contact_note, "warnings": found}, indent=2))
         return 0
     cols = [("longest_run_encoder", "enc run", "{:d}"), ("longest_run_imu", "imu run", "{:d}"),
             ("dispersion_mm", "disp mm", "{:.2f}"), ("soles_height_mm", "soles mm", "{:+.1f}"),
@@ -183,8 +186,26 @@ def cmd_check(a: argparse.Namespace) -> int:
           f"{np.degrees(LIMITS.gravity_motion_rad):g}°; slide {LIMITS.slide_m * 1e3:g} mm; yaw "
           f"{np.degrees(LIMITS.yaw_rad):g}°; sole tilt change {np.degrees(LIMITS.sole_tilt_rad):g}° "
           f"({'raw encoders and ' + a.result + ', the better fit' if a.result else offsets_from})")
+    print(f"contact check: {contact_note}")
     print("\n".join(["warnings:"] + [f"  - {w}" for w in found]) if found else "no data warnings")
     return 0
+
+
+def _contact_test(legmap, recs, dq) -> tuple[list | None, str]:
+    """(the per-stance contact test of `recs`, the calibrator's own, or None; a line on
+    what it judged)."""
+    from legcal_bench.errors import CalibrationError
+    from legcal_bench.estimation.checks.contact import recordings_contact_check
+
+    try:
+        contacts = recordings_contact_check(legmap, recs, dq)
+    except CalibrationError as e:
+        return None, f"not run: the recordings cannot be fitted ({e})"
+    if contacts is None:
+        return None, "not run: the recordings declare no sensor noise to judge it against, or hold one stance"
+    flagged = sum(c.flagged for c in contacts)
+    return contacts, (f"{len(contacts)} stances tested against the others on the declared noise (the calibrator's "
+                      f"test), {flagged} off one plane")
 
 
 def cmd_design(a: argparse.Namespace) -> int:
@@ -499,13 +520,15 @@ def add_commands(sub) -> None:
     sc.set_defaults(func=cmd_score)
 
     ck = sub.add_parser("check", help="check a session set's data: frozen channels, swapped columns, IMU axes, "
-                                      "soles apart, slides, yaw creep, lifted heels (no calibration)",
+                                      "soles apart, slides, yaw creep, lifted heels, soles off one plane "
+                                      "(no calibration)",
                         description="Measure each recording of a session set against the data checks' limits "
                                     "(identical-value runs, inter-foot dispersion, the soles' plane, the IMU's "
-                                    "vertical against the posture, slide, yaw creep, sole tilt change) and print "
-                                    "the warnings, naming stance, channel and likely cause. Judged at --result's "
-                                    "offsets, or at the offsets the framework's own fit profiles out. Writes "
-                                    "nothing.")
+                                    "vertical against the posture, slide, yaw creep, sole tilt change), run the "
+                                    "calibrator's per-stance contact test (each stance's soles on one plane at the "
+                                    "offsets of the others, against the declared noise) and print the warnings, "
+                                    "naming stance, channel and likely cause. Judged at --result's offsets, or at "
+                                    "the offsets the framework's own fit profiles out. Writes nothing.")
     robot_args(ck)
     ck.add_argument("--bags", required=True, help="directory of recordings (collect --out or import --out)")
     ck.add_argument("--allow-partial", action="store_true", help="read a folder without session.json (every *.npz "

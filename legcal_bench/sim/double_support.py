@@ -592,7 +592,9 @@ class DoubleSupportSim:
         fk = joint_frame_kinematics(self.true_kin, q_t)
         r = Log(inverse(fk.C) @ (inverse(soles[:, 0]) @ soles[:, 1]))
         Kinv_Gt = np.swapaxes(fk.G, 1, 2) / self.scene.servo_kp[None, :, None]
-        dq = (Kinv_Gt @ np.linalg.solve(fk.G @ Kinv_Gt, r[..., None]))[..., 0]
+        # pinv, not solve: the 6x6 is singular where the legs' joints cannot move the soles'
+        # transform every way (a leg of five joints at a straight-knee posture: issue #60).
+        dq = (Kinv_Gt @ (np.linalg.pinv(fk.G @ Kinv_Gt, hermitian=True) @ r[..., None]))[..., 0]
         T_left_c = self.true_kin.sole_poses_batch(q_t + dq)[0]
         compromise = (soles[:, 0] @ inverse(T_left_c))[:, :3, 3]
         return (np.linalg.norm(pelvis[:, :3, 3] - predicted, axis=-1),

@@ -134,3 +134,26 @@ def test_a_clean_realistic_set_reads_as_noise_and_a_small_wedge_still_stands_out
     flagged = [c for c in found["wedge"] if c["flagged"]]
     assert [c["recording"] for c in flagged] == ["stance_II"] and flagged[0]["sole"] == "left"
     assert abs(np.rad2deg(flagged[0]["tilt_rad"][0]) + 0.05) < 0.01
+
+
+def test_check_runs_the_calibrators_contact_test(sets, capsys):
+    """One test for both (issue #60): `legcal-bench check` flags the stance the calibrator
+    flags, with the calibrator's chi2 to within the two fits' trimming, and nothing on
+    the clean set of the same seed."""
+    import json
+
+    from legcal_bench.cli import main
+
+    legmap = load_robot("a3")
+    for name, expect in (("wedge", ["stance_II"]), ("clean", [])):
+        res = InterFootCalibrator(setting="sensor").calibrate(legmap, load_session(sets[name], robot=legmap))
+        calib = {c["recording"]: c for c in res.diagnostics["contact_check"]["stances"]}
+        assert main(["check", "--bags", str(sets[name]), "--robot", "a3", "--json"]) == 0
+        out = json.loads(capsys.readouterr().out)
+        check = {c["recording"]: c for c in out["contact_check"]}
+        assert [n for n, c in check.items() if c["flagged"]] == expect
+        assert [n for n, c in calib.items() if c["flagged"]] == expect
+        for n in check:
+            assert np.isclose(check[n]["chi2"], calib[n]["chi2"], rtol=0.05, atol=0.5)
+        assert any(w.startswith("stance stance_II: the soles were not on one plane") for w in out["warnings"]) \
+            == bool(expect)

@@ -101,3 +101,28 @@ def test_collects_summary_prints_what_the_preset_leaves_out(five):
     assert note in text and f"over {five.n_joints})" in text
     gains = next(line for line in text.splitlines() if line.startswith("servo gains"))
     assert gains.count("(MJCF)") == five.leg_joints  # the left leg's
+
+
+def test_the_pelvis_hold_error_takes_a_chain_that_cannot_move_every_way(tmp_path):
+    """Issue #60: straight legs of five joints with the sole under the ankle cannot move
+    one sole vertically relative to the other; the strained pose's 6x6 system is then
+    singular (it raised `numpy.linalg.LinAlgError`) and the compromise is the least-norm one."""
+    from dataclasses import replace
+
+    from legcal_bench.protocol.servos import servo_gains
+    from legcal_bench.robots.design import A3
+    from legcal_bench.sim.double_support import DoubleSupportSim
+    from legcal_bench.sim.sensors import sim_sensors
+
+    straight = replace(A3, name="straight_five", absent_roles=("ankle_roll",), thigh=(0.0, 0.0, -0.34),
+                       shin=(0.0, 0.0, -0.37), sole_offset=(0.0, 0.0, -0.058))
+    lm = load_robot(str(write_robot(straight, tmp_path)))
+    sim = DoubleSupportSim(lm, "weld", np.zeros(lm.n_joints), sim_sensors("zero"), servo_gains=servo_gains(lm),
+                           settle_s=0.2)
+    q = np.zeros((2, lm.n_joints))
+    soles = np.stack(sim.true_kin.sole_poses_batch(q), axis=1)
+    soles[1, 1, 0, 3] += 1e-3  # the right sole 1 mm forward in the second frame: a strain the chain can take
+    hold, strain, beyond = sim._pelvis_hold_error({"time": np.zeros(2), "q_target": q}, soles,
+                                                  np.repeat(np.eye(4)[None], 2, axis=0))
+    assert np.all(np.isfinite(hold)) and np.all(np.isfinite(strain)) and np.all(np.isfinite(beyond))
+    assert strain[0] == 0.0 and 0.0 < strain[1] < 1e-3

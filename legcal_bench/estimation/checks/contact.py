@@ -1,8 +1,16 @@
 """The per-stance contact check on a fit: were each stance's soles on one flat floor?
 (`legcal_bench.estimation.checks.coplanarity` judges one stance; this runs it on the
-stance problem, every stance tested against the others.)"""
+stance problem, every stance tested against the others.)
+
+One test for every caller (issue #60): the calibrator runs `contact_check` on its own
+fit's segments, `legcal-bench check` runs it through `recordings_contact_check` on the
+framework's fit of the same recordings; both judge it on the noise-weighted problem, so
+they flag the same stances. (`datacheck.soles_coplanar` is a gross screen: soles 20 mm
+or 10 degrees off one plane, a wrong sole frame, not this test.)"""
 
 from __future__ import annotations
+
+from dataclasses import replace
 
 import numpy as np
 
@@ -10,7 +18,7 @@ from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stan
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
 from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
-from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights
+from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights, prepare_sensor
 
 CONTACT_CHECKS = ("flag", "drop", "off")
 
@@ -47,6 +55,20 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
         problem.build([s for s in problem.segments if s.recording != worst.recording])
         dq, _ = problem.solve(dq, prep.options)
     return [final[n] for n in dict.fromkeys(s.recording for s in segments)]
+
+
+def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) -> list[StanceContact] | None:
+    """`contact_check` on `recordings` (their stances and standing): the framework's fit
+    (declared-noise weights; solve, trim, solve, from `dq0`, zeros by default), judged as
+    the calibrator judges its own. None as `contact_check`; raises `CalibrationError`
+    where the recordings cannot be fitted."""
+    training = [r for r in recordings if r.kind in ("stance", "standing")]
+    prep = prepare_sensor(legmap, training)
+    problem = StanceProblem.of(prep)
+    dq, _, _ = problem.solve_trimmed(np.zeros(legmap.n_joints) if dq0 is None else np.asarray(dq0, float),
+                                     prep.options)
+    prep = replace(prep, options=replace(prep.options, bound=problem.bound))
+    return contact_check(prep, problem.segments, dq, solved=True)
 
 
 def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[StanceContact]:
