@@ -393,6 +393,10 @@ def add_commands(sub) -> None:
             t.add_argument("--robots", nargs="+", default=None,
                            help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design; "
                                 f"default {' '.join(robots)} and every generated robot)")
+        elif name == "contact-floor":
+            t.add_argument("--robots", nargs="+", default=robots,
+                           help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design."
+                                f"GENERATED_DESIGNS, e.g. five_joint_capsule_heel; default {' '.join(robots)})")
         else:
             t.add_argument("--robots", nargs="+", default=robots, help="built-in names or leg-map paths")
         t.add_argument(f"--{option}", nargs="+", default=None, help=f"which {option} (default all)")

@@ -24,9 +24,10 @@ INJECTED_DEG = 3.0
 def default_robots() -> list[str]:
     """The built-ins, the G1 and every generated robot (`legcal_bench.robots.design`)."""
     from legcal_bench.benchmark.suites import EXTERNAL_ROBOT
-    from legcal_bench.robots.design import GENERATED, VARIATIONS
+    from legcal_bench.robots.design import GENERATED, STAND_INS, VARIATIONS
 
-    return ["a3", "a2", "pair_pry", "pair_ryp", EXTERNAL_ROBOT] + [d.name for d in (*VARIATIONS, *GENERATED)]
+    return ["a3", "a2", "pair_pry", "pair_ryp", EXTERNAL_ROBOT] + [d.name for d in (*VARIATIONS, *GENERATED,
+                                                                                   *STAND_INS)]
 
 
 def offsets_for(legmap, seed: int) -> tuple[float, ...]:
@@ -65,16 +66,10 @@ def _case(args):
 
 def build(robots, cases=CASES, seeds: int = 50, workers: int = 2, progress: bool = True) -> dict:
     """`robots`: built-in names, leg-map paths, or the names of the generated robots
-    (`legcal_bench.robots.design.VARIATIONS`, `GENERATED`: written for the run)."""
-    from legcal_bench.files.parallel import map_with_progress
-    from legcal_bench.reports.robots_check import _design_robots
+    (`legcal_bench.robots.design.GENERATED_DESIGNS`: written for the run)."""
+    from legcal_bench.reports.robot_cases import map_robot_cases
 
-    with scratch_dir("holdsrobots") as folder:
-        paths = _design_robots(list(robots), Path(folder))
-        jobs = [(r, c, s) for r in paths for c in cases for s in range(seeds)]
-        rows = map_with_progress(_case, jobs, workers, "contact-holds", progress)
-    for r in rows:  # the name given, not the run's temporary path
-        r["robot_spec"] = robots[paths.index(r["robot_spec"])]
+    rows = map_robot_cases(_case, robots, cases, seeds, workers, "contact-holds", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
 

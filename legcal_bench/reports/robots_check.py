@@ -35,7 +35,7 @@ from legcal_bench.protocol.servos import servo_gains
 from legcal_bench.protocol.stances import STANCES, fit_stance
 from legcal_bench.provenance import code_version, describe
 from legcal_bench.robots import BUILTIN, available, load_robot, robot_label
-from legcal_bench.robots.build import write_robot
+from legcal_bench.robots.build import write_designs, write_robot
 from legcal_bench.robots.design import GENERATED, VARIATIONS, stiff_twin
 from legcal_bench.robots.kinematics import LegKinematics
 from legcal_bench.sim.hold import HOLD_LIMITS
@@ -206,10 +206,9 @@ def _design_robots(names: list[str] | None, folder: Path) -> list[str]:
     """Leg-map paths (or built-in names) of `names`: a variation's or generated robot's
     name (written under `folder`), a built-in or a leg-map path; by default every
     variation and the first generated robot."""
-    designs = {d.name: d for d in (*VARIATIONS, *GENERATED)}
     if names is None:
         names = [d.name for d in VARIATIONS] + [GENERATED[0].name]
-    return [str(write_robot(designs[n], folder)) if n in designs else n for n in names]
+    return write_designs(names, folder)
 
 
 def _cols(lm, side: str) -> list[int]:

@@ -89,6 +89,21 @@ def _foot(design: LegDesign, side: str) -> _Foot:
                  (sole + [0, 0, t / 2]).round(6), (hl, hw, t / 2))
 
 
+def _sole_geoms(design: LegDesign, f: _Foot, side: str) -> list[dict]:
+    """The sole's collision geoms (`LegDesign.heel`): one box, or a toe box over the front
+    half and the heel a capsule along the foot's centre line, its bottom on the sole plane."""
+    name = f"{side}_sole_geom"
+    if design.heel == "box":
+        return [dict(name=name, type="box", size=list(f.box_half), pos=f.box.tolist())]
+    if design.heel != "capsule":
+        raise ValueError(f"heel={design.heel!r}: 'box' or 'capsule'")
+    hl, hw, r = f.box_half
+    toe = (f.box + [hl / 2, 0.0, 0.0]).round(6)
+    heel = [(f.sole + [x, 0.0, r]).round(6).tolist() for x in (-hl + r, -r)]
+    return [dict(name=name, type="box", size=[hl / 2, hw, r], pos=toe.tolist()),
+            dict(name=name.replace("sole", "heel"), type="capsule", fromto=[*heel[0], *heel[1]], size=[r])]
+
+
 def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool = True,
                 foot_frame_rpy: tuple[float, float, float] = (0.0, 0.0, 0.0),
                 waist: int = 1) -> tuple[mjcf.RootElement, LegMap]:
@@ -169,8 +184,8 @@ def build_model(design: LegDesign, *, upper_body: bool = False, sole_sites: bool
         f = _foot(design, side)
         sole_pos, corners = f.sole, f.corners
         foot.add("inertial", pos=f.com.tolist(), mass=design.foot_mass, diaginertia=f.inertia.tolist())
-        foot.add("geom", name=f"{side}_sole_geom", type="box", size=list(f.box_half), pos=f.box.tolist(),
-                 rgba=(0.25, 0.25, 0.3, 1), friction=[1.0, 0.02, 0.001], condim=6)
+        for geom in _sole_geoms(design, f, side):
+            foot.add("geom", **geom, rgba=(0.25, 0.25, 0.3, 1), friction=[1.0, 0.02, 0.001], condim=6)
         ft = FrameSpec(site=f"{side}_ft")
         foot.add("site", name=f"{side}_ft", pos=list(design.ft_pos), size=[0.01])
         if sole_sites:
@@ -236,12 +251,23 @@ def write_robot(design: LegDesign, out_dir: Path, **kwargs) -> Path:
     return _write(design, legmap, Path(out_dir) / f"{design.name}.xml", to_clean_xml(model))
 
 
+def write_designs(robots: list[str], folder: Path) -> list[str]:
+    """`robots` with each generated robot's name (`design.GENERATED_DESIGNS`) replaced by
+    the leg-map path of its model written under `folder`; built-in names and leg-map
+    paths as given."""
+    from legcal_bench.robots.design import GENERATED_DESIGNS
+
+    return [str(write_robot(GENERATED_DESIGNS[r], Path(folder))) if r in GENERATED_DESIGNS else r for r in robots]
+
+
 def build_urdf(design: LegDesign) -> tuple[str, LegMap]:
     """The URDF twin of `build_model(design)` and its leg map: the same links, joints,
     axes, limits and inertias (each link's inertia as in the MJCF), the soles as collision
     boxes, the leg map's frames as poses relative to links (a URDF has no sites) and the
     design's servo gains in the leg map (a URDF has no actuators). The joints' armature
     has no URDF field: the twin simulates without it."""
+    if design.heel != "box":
+        raise ValueError(f"{design.name}: heel={design.heel!r} has no URDF twin (a URDF has no capsule): heel='box'")
     robot = ET.Element("robot", name=f"{design.name}_urdf")
 
     def num(v) -> str:

@@ -107,6 +107,10 @@ class LegDesign:
     # The two ankle joints from shin to foot: pitch then roll (the built-ins), or roll
     # then pitch (an ankle whose roll axis is the proximal one).
     ankle_order: tuple[str, str] = ("ankle_pitch", "ankle_roll")
+    # The sole's collision shape: "box" (one box the sole's size), or "capsule" (a toe box
+    # over the sole's front half and, behind it, the heel as one capsule on the foot's
+    # centre line, lying along it: the heel touches the floor along a line, not a face).
+    heel: str = "box"
 
     @property
     def roles(self) -> tuple[str, ...]:
@@ -233,3 +237,21 @@ VARIATIONS: tuple[LegDesign, ...] = (
 # Issue #59's generated test robot: the A3-like robot with its ankle roll before its
 # ankle pitch (the same chain slots: the roll axis where the pitch axis was).
 ROLL_FIRST_ANKLE = replace(A3, name="a3_roll_first_ankle", ankle_order=("ankle_roll", "ankle_pitch"))
+
+
+# Issue #60's stand-ins for robots unlike ours on a contact floor: a leg of five joints
+# whose heel is one capsule on the foot's centre line (no ankle roll to level the sole, a
+# heel that rolls); a heavy full-size robot (~90 kg, legs 1.2x the A3-like's) with servos
+# soft for its weight; a
+# roll-yaw-pitch hip with its roll and yaw axes canted 45 degrees.
+# (The heavy robot's servo stiffness is scaled with its mass, not with mass x length as
+# its gravity load is: 0.83x the A3-like's stiffness against its weight.)
+STAND_INS: tuple[LegDesign, ...] = (
+    replace(A3, name="five_joint_capsule_heel", absent_roles=("ankle_roll",), heel="capsule"),
+    replace(A3.scaled("heavy_full_size", length=1.2, mass=1.65),
+            servos={r: Servo(s.kp * 1.65, s.kv * 1.65, s.torque_limit * 1.65 * 1.2) for r, s in A3.servos.items()}),
+    replace(A3, name="ryp_canted_hips", hip_order=R_Y_P, hip_cant=0.7853981633974483),
+)
+
+# Every generated robot by name (what `legcal_bench.robots.build.write_designs` writes).
+GENERATED_DESIGNS: dict[str, LegDesign] = {d.name: d for d in (*VARIATIONS, *GENERATED, *STAND_INS, ROLL_FIRST_ANKLE)}
