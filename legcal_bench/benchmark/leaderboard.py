@@ -467,7 +467,13 @@ REPORT_SECTIONS = (
     ("contact_floor", "contact_floor", "legcal_bench.reports.contact_floor", "Contact floor against weld floor"),
     ("contact_floor_robustness", "contact_floor", "legcal_bench.reports.contact_floor",
      "Contact floor: robustness to the floor's parameters"),
+    ("contact_floor_realistic", "contact_floor", "legcal_bench.reports.contact_floor",
+     "Contact floor against weld floor: realistic sensors"),
+    ("contact_floor_stand_ins", "contact_floor", "legcal_bench.reports.contact_floor",
+     "Contact floor against weld floor: the stand-ins and the whole-body G1"),
     ("contact_holds", "contact_holds", "legcal_bench.reports.contact_holds", "Holding stances on the contact floor"),
+    ("contact_holds_stand_ins", "contact_holds", "legcal_bench.reports.contact_holds",
+     "Holding stances on the contact floor: the stand-ins"),
 )
 
 
