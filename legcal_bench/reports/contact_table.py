@@ -2,15 +2,18 @@
 in one stance, and the contact floor, on each robot over seeds.
 
 Cases (weld unless named; `calibrated-imu` sensors unless the case ends in `realistic`,
-the paper's injection):
+the paper's injection unless the case names `random:3`):
   clean        no effect: every flag is a false alarm;
+  kinematic    the same in kinematic mode;
   wedge 0.3    `shim:side=S,roll=0.3,stance=T`, S and T alternating with the seed: the
                stance T must be flagged, its sole named S;
   wedge 0.05   the same at 0.05 deg (near the check's size floor);
   contact      the contact floor, no effect: the soles really do sit off one plane there
                (they rock and sink under the load); the truth says by how much;
-  <case> realistic  any case above with realistic sensors (an uncalibrated IMU:
-               `legcal_bench.sim.sensors`), e.g. `contact realistic` (issue #60).
+  <case> random:3  any case above with the offsets random:3@seed (3 deg RMS);
+  <case> [random:3] realistic  any case above with realistic sensors (an uncalibrated
+               IMU: `legcal_bench.sim.sensors`), e.g. `contact random:3 realistic`
+               (issue #60).
 Each set is calibrated with `interfoot` (operating setting) with `contact_check=flag`
 (the offsets of `off`) and `contact_check=drop`; a set the robot does not hold
 (HoldError) is counted as failed. Scored: the stances flagged against the
@@ -28,8 +31,10 @@ import numpy as np
 from legcal_bench.files.scratch import scratch_dir
 
 CASES = ("clean", "wedge 0.3", "wedge 0.05", "contact")
+EXTRA_CASES = ("kinematic",)  # clean, kinematic mode
 REALISTIC = " realistic"  # a case's suffix: realistic sensors instead of calibrated-imu
-KNOWN_CASES = CASES + tuple(c + REALISTIC for c in CASES)
+RANDOM = " random:3"  # before it: the offsets random:3@seed instead of the paper's
+KNOWN_CASES = tuple(c + o + r for c in CASES + EXTRA_CASES for o in ("", RANDOM) for r in ("", REALISTIC))
 
 
 def case_sensors(case: str) -> str:
@@ -37,14 +42,19 @@ def case_sensors(case: str) -> str:
     return "realistic" if case.endswith(REALISTIC) else "calibrated-imu"
 
 
+def case_offsets(case: str, seed: int) -> str:
+    """The injected offsets of `case` for `seed`: the paper's, or random:3@seed."""
+    return f"random:3@{seed}" if case.removesuffix(REALISTIC).endswith(RANDOM) else "paper"
+
+
 def case_spec(case: str, seed: int) -> tuple[str, tuple[str, ...], str | None, str | None]:
     """(mode, effect specs, the wedge's stance, its side) of `case` for `seed`."""
-    case = case.removesuffix(REALISTIC)
+    case = case.removesuffix(REALISTIC).removesuffix(RANDOM)
     side, stance = ("left", "right")[seed % 2], ("II", "III")[(seed // 2) % 2]
     if case.startswith("wedge"):
         deg = case.split()[1]
         return "weld", (f"shim:side={side},roll={deg},stance={stance}",), f"stance_{stance}", side
-    return ("contact" if case == "contact" else "weld"), (), None, None
+    return {"contact": "contact", "kinematic": "kinematic"}.get(case, "weld"), (), None, None
 
 
 def true_departures(paths) -> dict[str, np.ndarray]:
@@ -80,8 +90,8 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     mode, effects, stance, side = case_spec(case, seed)
     with scratch_dir("contact") as work:
         try:
-            collect(CollectConfig(robot=robot, mode=mode, sensors=case_sensors(case), seed=seed, effects=effects),
-                    Path(work) / "set", progress=False)
+            collect(CollectConfig(robot=robot, mode=mode, sensors=case_sensors(case), seed=seed, effects=effects,
+                                  offsets=case_offsets(case, seed), heldout=0), Path(work) / "set", progress=False)
         except HoldError as e:  # a set the robot cannot hold is a failed case, counted, not a crash
             return {"robot": legmap.name, "robot_spec": robot, "case": case, "seed": seed, "mode": mode,
                     "failed": str(e)}
@@ -165,7 +175,7 @@ def markdown(data: dict, made_by: str, code: str) -> str:
 
     lines = ["# The per-stance contact check", "",
              f"Made by `{made_by}` ({code}). `calibrated-imu` sensors (`realistic` where the case says so), the "
-             "paper's injection, `interfoot` "
+             "paper's injection (random:3@seed where the case says so), `interfoot` "
              "(operating setting). Truly off one plane: the simulator's own sole poses put the stance's mean relative "
              f"tilt above {np.rad2deg(MIN_TILT_RAD):.2f} deg or its height above {MIN_HEIGHT_M * 1e3:.1f} mm (the "
              "check's size floor). Errors: the flagged stances' estimated departure against the truth's. Offsets: "

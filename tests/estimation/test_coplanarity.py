@@ -157,3 +157,27 @@ def test_check_runs_the_calibrators_contact_test(sets, capsys):
             assert np.isclose(check[n]["chi2"], calib[n]["chi2"], rtol=0.05, atol=0.5)
         assert any(w.startswith("stance stance_II: the soles were not on one plane") for w in out["warnings"]) \
             == bool(expect)
+
+
+def test_a_misfit_every_stance_shares_is_noise_not_soles_off_one_plane(tmp_path):
+    """On a contact floor the soles rock and give under a load that changes with the
+    posture: every stance's chi2 is outside the declared noise (here 89-211 on 3 dof), no
+    single stance is off one plane (the truth: < 0.003 deg). Judged at the declared noise,
+    three of this clean 12-joint G1 set's four stances were flagged (issue #60,
+    `reports/contact_check_realistic`); judged at the other stances' shared misfit
+    (`shared_misfit`), none is, and the scale says by how much the noise model was off."""
+    from pathlib import Path
+
+    legmap = load_robot("examples/unitree_g1.legmap.yaml")
+    robot = str(Path(__file__).parents[2] / "examples" / "unitree_g1.legmap.yaml")
+    collect(CollectConfig(robot=robot, mode="contact", sensors="realistic", seed=1, heldout=0), tmp_path / "s",
+            progress=False)
+    res = InterFootCalibrator().calibrate(legmap, load_session(tmp_path / "s", robot=legmap))
+    check = res.diagnostics["contact_check"]["stances"]
+    assert len(check) == 4 and not any(c["flagged"] for c in check)
+    # Without the scale, three stances are significant at the family-wise 1 %.
+    from scipy.stats import chi2 as chi2_dist
+
+    assert sum(chi2_dist.sf(c["chi2"], c["dof"]) < 0.01 / 4 for c in check) >= 3
+    assert all(c["noise_scale"] > 10 for c in check)
+    assert not any("not on one plane" in w for w in res.warnings)

@@ -13,8 +13,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
+from scipy.stats import chi2 as chi2_dist
 
-from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances
+from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, shared_misfit
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
 from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
@@ -30,7 +31,9 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
     setting (a prior's pull would show as a departure), stances tested against the
     others; the worst flagged stance is set aside and the rest tested again without it,
     while three or more remain (one bad stance would otherwise spoil the others'
-    predictions). `solved`: `dq0` is the optimum of `prep`'s weights over `segments`,
+    predictions). Each round is judged at the shared misfit of the stances other than the
+    least consistent one, among themselves (`coplanarity.shared_misfit`: 1 where the
+    declared noise holds, the stated fallback where it does not). `solved`: `dq0` is the optimum of `prep`'s weights over `segments`,
     so where those are the noise weights it is taken as it is, not solved for again.
     None when the recordings declare no noise to judge it against or have a single
     stance."""
@@ -44,17 +47,34 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
     else:
         dq, _ = problem.solve(dq0, prep.options)
     final: dict[str, StanceContact] = {}
+    items, scale = _stance_items(prep, problem, dq, sig), 1.0
     while True:
-        results = _stance_contacts(prep, problem, dq, sig)
+        raw = check_stances(items, sig["encoder"])
+        if len(raw) >= 3:  # judged at the shared misfit of the stances other than the worst
+            # the least consistent stance (log p, then chi2/dof where log p underflows too)
+            worst = min(raw, key=lambda c: (chi2_dist.logsf(c.chi2, c.dof), -c.chi2 / c.dof)).recording
+            sub, dq_sub, sub_items = _without(prep, problem, dq, sig, worst, weights)
+            scale = shared_misfit([c.chi2 / c.dof for c in check_stances(sub_items, sig["encoder"])])
+        results = check_stances(items, sig["encoder"], scale=scale)
         bad = [c for c in results if c.flagged]
         if not bad or len(results) <= 2:
             final.update({c.recording: c for c in results})
             break
-        worst = max(bad, key=lambda c: c.chi2)
-        final[worst.recording] = worst
-        problem.build([s for s in problem.segments if s.recording != worst.recording])
-        dq, _ = problem.solve(dq, prep.options)
+        flagged = max(bad, key=lambda c: c.chi2)
+        final[flagged.recording] = flagged
+        if flagged.recording != worst:
+            sub, dq_sub, sub_items = _without(prep, problem, dq, sig, flagged.recording, weights)
+        problem, dq, items = sub, dq_sub, sub_items
     return [final[n] for n in dict.fromkeys(s.recording for s in segments)]
+
+
+def _without(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict, name: str, weights):
+    """(problem, offsets, stance items) of `problem` without the stance `name`, solved
+    from `dq`."""
+    sub = StanceProblem(prep.kin, [s for s in problem.segments if s.recording != name], weights, None, [],
+                        prep.options.bound)
+    dq_sub, _ = sub.solve(dq, prep.options)
+    return sub, dq_sub, _stance_items(prep, sub, dq_sub, sig)
 
 
 def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) -> list[StanceContact] | None:
@@ -71,9 +91,9 @@ def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) 
     return contact_check(prep, problem.segments, dq, solved=True)
 
 
-def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[StanceContact]:
-    """Each stance's departure from one plane at the offsets of the others. The others'
-    offsets come with a fixed error of the IMU's vertical as a nuisance, within the
+def _stance_items(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[dict]:
+    """`check_stances`'s input of each segment: its departure from one plane at the
+    offsets of the other stances, and their covariance. The others' offsets come with a fixed error of the IMU's vertical as a nuisance, within the
     recordings' declared bound (`SensorModel.tilt_bound`, the prior's standard
     deviation): on a robot whose hip does not start with pitch, such a tilt moves the
     offsets differently with each stance's posture, and a realistic (uncalibrated) IMU
@@ -111,4 +131,4 @@ def _stance_contacts(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig
                       "delta": delta[s.recording],
                       "cov": np.linalg.pinv(total - info[s.recording], hermitian=True)[:nj, :nj],
                       "left_tilt": fr.r[m, 7:9].mean(axis=0)})
-    return check_stances(items, sig["encoder"])
+    return items

@@ -20,7 +20,10 @@ Sigma_M = sigma_q^2 / N^2 sum_k G_k G_k^T the mean's covariance from encoder noi
 covariance of the other stances' estimate (the inverse of their whitened information,
 `legcal_bench.estimation.information.whitening`; with a fixed error of the IMU's vertical as a
 nuisance within the declared tilt bound, `legcal_bench.estimation.checks.contact`).
-chi2 with 3 degrees of freedom per contact segment; a stance is flagged at a family-wise false-alarm rate `ALPHA` over the
+chi2 with 3 degrees of freedom per contact segment, judged at the stances' shared misfit
+where they share one beyond the declared noise (`shared_misfit`: the median chi2/dof
+over the stances, a Birge ratio: the stated fallback where the noise model does not hold,
+as on a contact floor whose soles rock and give under load); a stance is flagged at a family-wise false-alarm rate `ALPHA` over the
 stances (Bonferroni) when its soles are also off one plane by more than `MIN_TILT_RAD`
 or `MIN_HEIGHT_M` (smaller departures are below what matters at the encoder's
 resolution, whatever their significance).
@@ -71,13 +74,14 @@ class StanceContact:
     height_m: float
     fit_tilt_rad: tuple[float, float]  # the same at the offsets fitted to every stance
     fit_height_m: float
-    std: tuple[float, float, float]  # of the departure (rad, rad, m)
-    chi2: float
+    std: tuple[float, float, float]  # of the departure (rad, rad, m), at the noise scale
+    chi2: float  # against the declared noise (judged at chi2 / noise_scale)
     dof: int
     p_value: float
     significant: bool
     flagged: bool
     sole: str  # "left", "right" or "unclear": where the wedge sits, when flagged
+    noise_scale: float = 1.0  # `shared_misfit`: the variance scale the chi2 was judged at
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -85,21 +89,24 @@ class StanceContact:
     def text(self) -> str:
         d, h = np.rad2deg(self.tilt_rad), self.height_m * 1e3
         where = f"under the {self.sole} sole" if self.sole != "unclear" else "under one sole"
+        scaled = f", judged at {self.noise_scale:.1f}x the declared noise's variance" if self.noise_scale > 1 else ""
         return (f"stance {self.recording}: the soles were not on one plane: the right sole tilted "
                 f"{d[0]:+.3f} deg about x, {d[1]:+.3f} deg about y, and its height {h:+.2f} mm relative to the "
-                f"left, at the other stances' offsets (chi2 {self.chi2:.0f} on {self.dof} dof, "
+                f"left, at the other stances' offsets (chi2 {self.chi2:.0f} on {self.dof} dof{scaled}, "
                 f"p = {self.p_value:.2g}); a wedge, pebble or uneven floor {where}?")
 
 
-def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA) -> list[StanceContact]:
+def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA,
+                  scale: float = 1.0) -> list[StanceContact]:
     """The check over contact segments, each a dict with: "recording"; "M" (4, 4) its
     mean inter-foot pose at the fit; "G" (N, 6, n) its frames' inter-foot Jacobians
     w.r.t. the n leg joints (`LegMap.n_joints`; mean held); "delta" (n,) the offsets'
     change without its recording; "cov" (n, n) the noise-only covariance of that estimate; "left_tilt" (2,) its mean left-sole tilt
-    against the IMU (rad). Segments of one recording are tested together."""
+    against the IMU (rad). Segments of one recording are tested together, judged at
+    `scale` times the declared noise's variance (`shared_misfit`)."""
     names = list(dict.fromkeys(s["recording"] for s in segments))
     left = {n: np.mean([s["left_tilt"] for s in segments if s["recording"] == n], axis=0) for n in names}
-    out = []
+    tests = {}
     for name in names:
         chi2, dof, obs, at_fit, var = 0.0, 0, [], [], []
         for s in (s for s in segments if s["recording"] == name):
@@ -118,8 +125,11 @@ def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA) ->
             obs.append(e)
             at_fit.append(c)
             var.append(np.diag(cov))
-        e, c, sd = np.mean(obs, axis=0), np.mean(at_fit, axis=0), np.sqrt(np.sum(var, axis=0)) / len(var)
-        p = float(chi2_dist.sf(chi2, dof))
+        tests[name] = (chi2, dof, np.mean(obs, axis=0), np.mean(at_fit, axis=0),
+                       np.sqrt(np.sum(var, axis=0)) / len(var))
+    out = []
+    for name, (chi2, dof, e, c, sd) in tests.items():
+        p = float(chi2_dist.sf(chi2 / scale, dof))
         significant = p < alpha / len(names)
         tilt = float(np.hypot(e[0], e[1]))
         flagged = significant and (tilt > MIN_TILT_RAD or abs(e[2]) > MIN_HEIGHT_M)
@@ -129,6 +139,20 @@ def check_stances(segments: list[dict], sigma_q: float, alpha: float = ALPHA) ->
             moved = float(np.linalg.norm(left[name] - np.mean(others, axis=0)))
             sole = "left" if moved > LEFT_SHARE * tilt else "right"
         out.append(StanceContact(name, (float(e[0]), float(e[1])), float(e[2]), (float(c[0]), float(c[1])),
-                                 float(c[2]), tuple(float(x) for x in sd), chi2, dof, p, bool(significant),
-                                 bool(flagged), sole))
+                                 float(c[2]), tuple(float(x) * np.sqrt(scale) for x in sd), chi2, dof, p,
+                                 bool(significant), bool(flagged), sole, float(scale)))
     return out
+
+
+def shared_misfit(chi2_per_dof: list[float]) -> float:
+    """The noise scale a stance is judged at: the median chi2 per dof of the other
+    stances' tests among themselves (the stance set aside; `contact.contact_check`), where
+    it exceeds 1, else 1. A misfit every stance shares (a contact floor's soles rock and
+    give under a load that changes with the posture: chi2/dof 3.6-17 per stance on clean
+    realistic contact sets, `reports/contact_check_realistic`) is outside the declared
+    noise but no single stance's departure, so it is taken as noise (a Birge ratio); the
+    stance tested is left out of it, as one stance off one plane spoils every other
+    stance's prediction."""
+    if not chi2_per_dof:
+        return 1.0
+    return max(1.0, float(np.median(chi2_per_dof)))
