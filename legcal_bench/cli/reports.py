@@ -372,8 +372,9 @@ def add_commands(sub) -> None:
              "contact floor (flags against the truth)",
              "Measure the inter-foot calibrator's per-stance contact check on clean data, on sets with a wedge "
              "under one sole in one stance, and on the contact floor, its flags against the truth, with the test's "
-             "chi2/dof; cases ending in ' realistic' use realistic sensors (e.g. 'contact realistic'). Writes "
-             "contact_table.md and .json."),
+             "chi2/dof; 'kinematic' is clean data in kinematic mode; a case with ' random:3' before any ' realistic' "
+             "injects random:3@seed instead of the paper's offsets; cases ending in ' realistic' use realistic "
+             "sensors (e.g. 'contact random:3 realistic'). Writes contact_table.md and .json."),
             ("contact-floor", "cases", 5, "leaderboard/contact_floor", cmd_contact_floor,
              "the contact floor against the weld floor (zero and realistic sensors) and its parts",
              "The contact floor against the weld floor (zero and realistic sensors) and its parts: the soles' "
@@ -393,7 +394,7 @@ def add_commands(sub) -> None:
             t.add_argument("--robots", nargs="+", default=None,
                            help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design; "
                                 f"default {' '.join(robots)} and every generated robot)")
-        elif name == "contact-floor":
+        elif name in ("contact-floor", "contact-table"):
             t.add_argument("--robots", nargs="+", default=robots,
                            help="built-in names, leg-map paths or generated robots' names (legcal_bench.robots.design."
                                 f"GENERATED_DESIGNS, e.g. five_joint_capsule_heel; default {' '.join(robots)})")

@@ -123,10 +123,11 @@ def _case(args):
 
 
 def build(robots, cases=CASES, seeds: int = 5, workers: int = 2, progress: bool = True) -> dict:
-    from legcal_bench.files.parallel import map_with_progress
+    """`robots`: built-in names, leg-map paths, or the names of the generated robots
+    (`legcal_bench.robots.design.GENERATED_DESIGNS`: written for the run)."""
+    from legcal_bench.reports.robot_cases import map_robot_cases
 
-    jobs = [(r, c, s) for r in robots for c in cases for s in range(seeds)]
-    rows = map_with_progress(_case, jobs, workers, "contact-table", progress)
+    rows = map_robot_cases(_case, robots, cases, seeds, workers, "contact-table", progress)
     return {"rows": rows, "summary": summarize(rows)}
 
 
