@@ -6,7 +6,8 @@ the paper's injection unless the case names `random:3`):
   clean        no effect: every flag is a false alarm;
   kinematic    the same in kinematic mode;
   wedge 0.3    `shim:side=S,roll=0.3,stance=T`, S and T alternating with the seed: the
-               stance T must be flagged, its sole named S;
+               stance T must be flagged, its sole named S (`pitch=` on legs without
+               an ankle roll, which cannot stand on a roll wedge);
   wedge 0.05   the same at 0.05 deg (near the check's size floor);
   contact      the contact floor, no effect: the soles really do sit off one plane there
                (they rock and sink under the load); the truth says by how much;
@@ -80,7 +81,7 @@ def run_case(robot: str, case: str, seed: int) -> dict:
     from legcal_bench.calibrators.base import calibrate_training
     from legcal_bench.calibrators.registry import get_calibrator
     from legcal_bench.data.recording import list_segments, load_session, load_truth
-    from legcal_bench.errors import HoldError
+    from legcal_bench.errors import HoldError, IKError
     from legcal_bench.estimation.checks.coplanarity import MIN_HEIGHT_M, MIN_TILT_RAD
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.protocol.collect import CollectConfig, collect
@@ -88,11 +89,13 @@ def run_case(robot: str, case: str, seed: int) -> dict:
 
     legmap = load_robot(robot)
     mode, effects, stance, side = case_spec(case, seed)
+    if "ankle_roll" not in legmap.joint_roles:  # no ankle roll to stand on a roll wedge: the wedge in pitch
+        effects = tuple(e.replace(",roll=", ",pitch=") for e in effects)
     with scratch_dir("contact") as work:
         try:
             collect(CollectConfig(robot=robot, mode=mode, sensors=case_sensors(case), seed=seed, effects=effects,
                                   offsets=case_offsets(case, seed), heldout=0), Path(work) / "set", progress=False)
-        except HoldError as e:  # a set the robot cannot hold is a failed case, counted, not a crash
+        except (HoldError, IKError) as e:  # a set the robot cannot hold or reach is a failed case, counted
             return {"robot": legmap.name, "robot_spec": robot, "case": case, "seed": seed, "mode": mode,
                     "failed": str(e)}
         recs = load_session(Path(work) / "set", robot=legmap)
