@@ -171,12 +171,13 @@ def outside_spec(name: str, seed: int, scale: float = 1.0, robot: str = "a3") ->
     return OUTSIDE[name].format(side=side, size=f"{outside_size(robot, name) * scale:g}"), side
 
 
-# Held-out sessions recorded per session set: none. Since #35 nothing here reads them
-# (the diagnosis, its calibrator and the chi-square at the truth read the training
-# recordings only), and each segment's randomness is its own (`collect`'s seed per
-# segment, held-out ones recorded last), so the training recordings are the same bytes
-# with or without them; they were 1500 of the 4150 frames of a default set.
-HELDOUT = 0
+# Held-out sessions recorded per session set: the paper's three. The diagnosis, its
+# calibrator and the chi-square at the truth read the training recordings only; the
+# held-out sessions score each candidate estimate after the choice (held-out foot height,
+# issue #61: a recommendation must not be worse than the offsets only). Each segment's
+# randomness is its own (`collect`'s seed per segment, held-out ones recorded last), so
+# the training recordings are the same bytes with or without them.
+HELDOUT = 3
 COLLECT: dict = {}  # CollectConfig overrides of every case `run` makes (a test's shorter sessions); in its key
 
 
@@ -212,6 +213,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     from legcal_bench.estimation.problem.fit import fit_model
     from legcal_bench.evaluation.metrics import rms
     from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
+    from legcal_bench.evaluation.scoring import heldout_scores
 
     specs, side, scale = (), None, None
     if kind == "library":
@@ -248,6 +250,7 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
         # own offset change (`offset_equivalent`: e.g. the zero a twisted link turns).
         equivalent = (_offset_equivalent(ctx, cfg, start, Path(work)) if kind == "outside"
                       else np.zeros(len(names)))
+        held = heldout_scores(rep, legmap, Path(work) / "set")
     if kind == "outside":
         row["offset_equivalent_rad"] = dict(zip(names, equivalent.tolist()))
     injected = np.asarray(truth.offsets) + equivalent
@@ -281,7 +284,9 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
                                       else float(np.rad2deg(c["offsets_std_rms_rad"]))),
               "offsets_distance": distance(c),
               "admissible": c.get("admissible"), "recommended": bool(c.get("recommended")),
-              "set_aside": c.get("set_aside")} for c in rep.get("candidates") or ()]
+              "set_aside": c.get("set_aside"), "k": c.get("k"),
+              "heldout_foot_height_mm": (held or {}).get("candidates", {}).get(c.get("name"))}
+             for c in rep.get("candidates") or ()]
     row.update(verdict=rep["verdict"], selected=rep["selected"], poor_fit=rep["poor_fit"],
                ambiguous=[a["effect"] for a in rep["ambiguous"]], summary=rep["summary"],
                chi2_per_dof=rep["detection"]["chi2_per_dof"], p_value=rep["detection"]["p_value"],
@@ -293,7 +298,9 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
                                 "recommended": float(np.rad2deg(rms(after - injected)))},
                confounded=[c["effect"] for c in rep["confounded"]],
                candidates=cands, recommended=rep.get("recommended"), generic=_generic(rep.get("generic")),
-               joints=len(names))
+               joints=len(names),
+               heldout_foot_height_mm=None if held is None else {"offsets_only": held["before"],
+                                                                   "recommended": held["after"]})
     return row
 
 
@@ -668,6 +675,71 @@ def done_when(rows: list[dict]) -> dict:
     return {"robots": out, "totals": tot}
 
 
+def pick_at_8e37d19(r: dict) -> str | None:
+    """The candidate the recommendation rule of 8e37d19 (before issue #61) picks from a
+    row's candidates: the claimed selection's fit, else the lowest leave-one-stance-out
+    chi2 among the admissible candidates, set-aside fits included, a tie within
+    AMBIGUOUS_BIC to the fewest parameters; the offsets only without cross-validation.
+    The comparison the issue asks for, from the same diagnoses."""
+    from legcal_bench.evaluation.modelgap import AMBIGUOUS_BIC
+
+    cands = r.get("candidates") or []
+    ok = [c for c in cands if c.get("admissible")]
+    label = " + ".join(r.get("selected") or [])
+    claim = next((c for c in ok if label and c["name"] == label), None)
+    if claim is not None:
+        return claim["name"]
+    if not ok or any(c.get("cv_chi2") is None or c.get("k") is None for c in ok):
+        return cands[0]["name"] if cands else None
+    low = min(c["cv_chi2"] for c in ok)
+    return min((c for c in ok if c["cv_chi2"] - low < AMBIGUOUS_BIC), key=lambda c: (c["k"], c["cv_chi2"]))["name"]
+
+
+HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "outside")
+
+
+def heldout_recommendation(rows: list[dict]) -> dict | None:
+    """Issue #61's bars on held-out foot height (mm, the held-out sessions through each
+    candidate): per robot, the spread of the offsets-only estimate's over the clean
+    seeds (its standard deviation, the allowance); per kind of case, how many
+    recommended estimates are worse than the offsets only's by more than it (the cases
+    listed) and how many improve on it (below the offsets only's), with the rule of
+    8e37d19 (`pick_at_8e37d19`) beside it. None without rows that score it."""
+    scored = [r for r in rows if r.get("heldout_foot_height_mm") and r["kind"] in HELDOUT_KINDS]
+    if not scored:
+        return None
+    out = {}
+    for robot in dict.fromkeys(r["robot"] for r in scored):
+        rr = [r for r in scored if r["robot"] == robot]
+        clean = [r["heldout_foot_height_mm"]["offsets_only"] for r in rr if r["kind"] == "clean"]
+        allowance = float(np.std(clean, ddof=1)) if len(clean) > 1 else None
+        kinds, worse = {}, []
+        for kind in HELDOUT_KINDS:
+            rs = [r for r in rr if r["kind"] == kind]
+            if not rs:
+                continue
+            base = [r["heldout_foot_height_mm"]["offsets_only"] for r in rs]
+            rec = [r["heldout_foot_height_mm"]["recommended"] for r in rs]
+            old = []
+            for r in rs:
+                hm = {c["name"]: c.get("heldout_foot_height_mm") for c in r.get("candidates") or ()}
+                old.append(hm.get(pick_at_8e37d19(r)))
+            kinds[kind] = {
+                "cases": len(rs), "not_offsets_only": sum(r.get("recommended") != "offsets only" for r in rs),
+                "improves": sum(a < b for a, b in zip(rec, base)),
+                "improves_at_8e37d19": sum(a is not None and a < b for a, b in zip(old, base)),
+                "worse": None if allowance is None else sum(a - b > allowance for a, b in zip(rec, base)),
+                "worse_at_8e37d19": None if allowance is None else sum(a is not None and a - b > allowance
+                                                                         for a, b in zip(old, base)),
+                "mean_offsets_only": float(np.mean(base)), "mean_recommended": float(np.mean(rec))}
+            if allowance is not None:
+                worse += [{"kind": kind, "name": r.get("name"), "seed": r["seed"], "recommended": r.get("recommended"),
+                           "offsets_only_mm": b, "recommended_mm": a, "verdict": r["verdict"]}
+                          for r, a, b in zip(rs, rec, base) if a - b > allowance]
+        out[robot] = {"clean_seeds": len(clean), "allowance_mm": allowance, "kinds": kinds, "worse": worse}
+    return out
+
+
 def _largest_equivalent(rows: list[dict]) -> float | None:
     """The largest offset change (deg) any of these outside cases' edits makes
     (`run_case`'s `offset_equivalent_rad`); None when no row records it."""
@@ -810,7 +882,34 @@ def markdown(data: dict, made_by: str, code: str) -> str:
     # candidates): runs made before it keep their pages as they were.
     if any(r["kind"] in ("outside", "library") and "candidates" in r for r in rows):
         L += ["", *done_when_markdown(done_when(list(rows)))]
+    held = heldout_recommendation(list(rows))
+    if held:
+        L += ["", *heldout_markdown(held)]
     return "\n".join(L) + "\n"
+
+
+def heldout_markdown(held: dict) -> list[str]:
+    """`heldout_recommendation` in words and a table."""
+    L = ["### The recommended estimate on the held-out sessions", "",
+         "Held-out foot height (mm, the held-out sessions' flat-ground row on the simulator's true postures) of the "
+         "recommended estimate against the offsets only's, per robot and kind of case. Allowance: the standard "
+         "deviation of the offsets only's over the robot's clean seeds; worse: recommended beyond the offsets only's "
+         "by more than it; improves: below the offsets only's; beside each, the same with the rule of 8e37d19 "
+         "(set-aside fits eligible, any lower left-out chi2 chooses) on the same diagnoses.", "",
+         "| robot | allowance (mm) | case | cases | not the offsets only | improves (8e37d19) | worse (8e37d19) "
+         "| mean held-out: offsets only / recommended (mm) |", "|---|---|---|---|---|---|---|---|"]
+    for robot, v in held.items():
+        for kind, k in v["kinds"].items():
+            L.append(f"| {robot} | {_cell(v['allowance_mm'], 4)} | {kind} | {k['cases']} | {k['not_offsets_only']} | "
+                     f"{k['improves']} ({k['improves_at_8e37d19']}) | "
+                     f"{'–' if k['worse'] is None else k['worse']} ({'–' if k['worse_at_8e37d19'] is None else k['worse_at_8e37d19']}) | "
+                     f"{k['mean_offsets_only']:.4f} / {k['mean_recommended']:.4f} |")
+    worse = [(robot, w) for robot, v in held.items() for w in v["worse"]]
+    if worse:
+        L += ["", "Recommended estimates worse than the offsets only's beyond the allowance:", ""]
+        L += [f"- {robot} {w['kind']} {w['name'] or ''} seed {w['seed']}: {w['recommended']} {w['recommended_mm']:.4f} "
+              f"mm against {w['offsets_only_mm']:.4f} ({w['verdict']})" for robot, w in worse]
+    return L
 
 
 def _distance_text(b: dict) -> str:

@@ -377,9 +377,10 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     from legcal_bench.data.recording import load_session
     from legcal_bench.errors import CalibrationError
     from legcal_bench.evaluation.modelgap import diagnose
+    from legcal_bench.evaluation.scoring import heldout_scores
     from legcal_bench.files.reports import write_report
     from legcal_bench.provenance import code_version, describe
-    from legcal_bench.reports.diagnose import (diagnosis_walks, heldout_scores, json_ready, markdown, plot,
+    from legcal_bench.reports.diagnose import (diagnosis_walks, json_ready, markdown, plot,
                                                truth_scores, walks_line)
     from legcal_bench.robots import load_robot
 

@@ -222,3 +222,22 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
         return None
     return {"postures": "+".join(sorted(kinds)),
             **{k: float(1e3 * rms(np.concatenate(v))) for k, v in heights.items()}}
+
+
+def heldout_scores(report: dict, legmap, bags: Path) -> dict | None:
+    """Held-out foot height RMS (mm) with the offsets-only estimate ("before"), the
+    recommended one ("after") and every candidate model at its fitted values
+    (`legcal_bench.evaluation.scoring.heldout_heights`). Scored after the choice: the
+    held-out sessions never pick the estimate."""
+    names = legmap.joint_names
+    paths = list_segments(bags, allow_partial=True)
+    out = heldout_heights(legmap, paths, [], {"before": [report["offsets_only_rad"][n] for n in names]})
+    if out is None:
+        return None
+    per = {}
+    for name, (effects, x) in report.get("_candidate_models", {}).items():
+        per[name] = heldout_heights(legmap, paths, effects, {"x": x})["x"]
+    rec = report.get("recommended")
+    out["after"] = per[rec] if rec in per else out["before"]
+    out["candidates"] = per
+    return out

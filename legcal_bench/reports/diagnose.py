@@ -34,28 +34,6 @@ def truth_scores(report: dict, bags: Path, joint_names: list[str]) -> dict | Non
     return out
 
 
-def heldout_scores(report: dict, legmap, bags: Path) -> dict | None:
-    """Held-out foot height RMS (mm) with the offsets-only estimate ("before"), the
-    recommended one ("after") and every candidate model at its fitted values
-    (`legcal_bench.evaluation.scoring.heldout_heights`). Scored after the choice: the
-    held-out sessions never pick the estimate."""
-    from legcal_bench.data.recording import list_segments
-    from legcal_bench.evaluation.scoring import heldout_heights
-
-    names = legmap.joint_names
-    paths = list_segments(bags, allow_partial=True)
-    out = heldout_heights(legmap, paths, [], {"before": [report["offsets_only_rad"][n] for n in names]})
-    if out is None:
-        return None
-    per = {}
-    for name, (effects, x) in report.get("_candidate_models", {}).items():
-        per[name] = heldout_heights(legmap, paths, effects, {"x": x})["x"]
-    rec = report.get("recommended")
-    out["after"] = per[rec] if rec in per else out["before"]
-    out["candidates"] = per
-    return out
-
-
 def diagnosis_walks(report: dict, legmap, bags: Path, policy: str, trials: int, progress: bool = True) -> dict:
     """`diagnose --walk`: the policy walked with the true offsets (the session's ground
     truth; for real logs the diagnosis's final estimate, said so) corrected by the

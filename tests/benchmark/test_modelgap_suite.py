@@ -256,6 +256,8 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
                            "offsets_cov_rad2": [[d**2, 0.0], [0.0, (d / 2) ** 2]]}],
            "recommended": "generic", "generic": {"explains": True, "consistent": ["f"], "inconsistent": []}}
     monkeypatch.setattr(ev, "diagnose", lambda *a, **k: rep)
+    monkeypatch.setattr("legcal_bench.evaluation.scoring.heldout_scores", lambda *a, **k: {
+        "before": 0.4, "after": 0.3, "candidates": {"offsets": 0.4, "generic": 0.3}})
     equivalent = {"outside": np.zeros(2)}
     monkeypatch.setattr(mg, "_offset_equivalent", lambda *a, **k: equivalent["outside"])
     row = mg.run_case("a3", "outside", "shank_bent", 0)
@@ -263,6 +265,9 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
     assert mg._generic({"explains": False, "families": {"a": {"consistent": True}, "b": {"consistent": False}}}) == {
         "explains": False, "consistent": ["a"], "inconsistent": ["b"], "chi2_per_dof": None, "parameters": None}
     assert [(c["name"], c["recommended"]) for c in row["candidates"]] == [("offsets", False), ("generic", True)]
+    # Each candidate's held-out foot height (the held-out sessions, after the choice).
+    assert row["heldout_foot_height_mm"] == {"offsets_only": 0.4, "recommended": 0.3}
+    assert [c["heldout_foot_height_mm"] for c in row["candidates"]] == [0.4, 0.3]
     assert [c["offsets_rms_deg"] for c in row["candidates"]] == pytest.approx([1.0, np.sqrt(0.5)])
     assert row["offsets_rms_deg"]["recommended"] == pytest.approx(np.sqrt(0.5))
     assert row["offsets_rms_deg"]["before"] == pytest.approx(1.0)
@@ -288,3 +293,31 @@ def test_a_case_row_records_each_candidate_with_its_error_against_the_truth(monk
         rep.pop(k)
     row = mg.run_case("a3", "outside", "shank_bent", 0)
     assert row["candidates"] == [] and row["recommended"] is None and row["generic"] is None
+
+
+def test_the_recommendation_is_scored_on_held_out_foot_height_beside_the_rule_of_8e37d19():
+    # Issue #61: per robot the allowance is the offsets only's held-out spread over the
+    # clean seeds; a recommendation beyond the offsets only's by more than it is counted
+    # and listed; the rule of 8e37d19 (set-aside fits eligible) picked from the same candidates.
+    def cand(name, k, cv, mm, set_aside=None, recommended=False):
+        return {"name": name, "k": k, "cv_chi2": cv, "admissible": True, "set_aside": set_aside,
+                "recommended": recommended, "heldout_foot_height_mm": mm}
+
+    clean = [{"robot": "r", "kind": "clean", "seed": s, "name": None, "verdict": "explained", "selected": [],
+              "recommended": "offsets only", "candidates": [cand("offsets only", 12, 10.0, h, recommended=True)],
+              "heldout_foot_height_mm": {"offsets_only": h, "recommended": h}} for s, h in enumerate((0.1, 0.2, 0.3))]
+    poor = {"robot": "r", "kind": "library", "seed": 0, "name": "imu_tilt", "verdict": "unexplained", "selected": [],
+            "recommended": "offsets only",
+            "candidates": [cand("offsets only", 12, 500.0, 0.37, recommended=True),
+                           cand("imu_tilt", 14, 300.0, 0.56, set_aside="a poor fit")],
+            "heldout_foot_height_mm": {"offsets_only": 0.37, "recommended": 0.37}}
+    assert mg.pick_at_8e37d19(poor) == "imu_tilt"  # the set-aside fit, which the new rule does not take
+    worse = dict(poor, seed=1, recommended="imu_tilt", heldout_foot_height_mm={"offsets_only": 0.37,
+                                                                              "recommended": 0.56})
+    held = mg.heldout_recommendation(clean + [poor, worse])
+    r = held["r"]
+    assert r["allowance_mm"] == pytest.approx(0.1) and r["clean_seeds"] == 3
+    lib = r["kinds"]["library"]
+    assert (lib["cases"], lib["worse"], lib["worse_at_8e37d19"], lib["improves"]) == (2, 1, 2, 0)
+    assert [w["seed"] for w in r["worse"]] == [1]
+    assert "worse than the offsets only's beyond the allowance" in "\n".join(mg.heldout_markdown(held))

@@ -276,9 +276,13 @@ def test_an_inadmissible_fit_is_named_and_not_selected(longer_shank):
 
 
 def test_the_recommendation_rule():
-    # A claimed selection's own fit; otherwise the lowest left-out chi2, a tie within 10
-    # going to the fewest parameters; an inadmissible candidate never (issue #41).
+    # A claimed selection's own fit; otherwise the lowest left-out chi2 among the
+    # candidates that beat the offsets only's by their extra parameters x ln(n_rows), a
+    # tie within 10 going to the fewest parameters; an inadmissible or set-aside
+    # candidate never (issues #41, #61).
     from legcal_bench.evaluation.modelgap import _recommend
+
+    ln_n = 5.0
 
     def cands():
         return [{"name": "offsets only", "k": 12, "cv_chi2": 500.0, "admissible": True},
@@ -287,17 +291,27 @@ def test_the_recommendation_rule():
                 {"name": "generic geometry", "k": 50, "cv_chi2": 100.0, "admissible": True},
                 {"name": "sparse geometry", "k": 14, "cv_chi2": 108.0, "admissible": True}]
 
-    assert _recommend(cands(), "selected", ["imu_tilt"])["name"] == "imu_tilt"  # the claim, 30 worse or not
+    assert _recommend(cands(), "selected", ["imu_tilt"], ln_n)["name"] == "imu_tilt"  # the claim, 30 worse or not
     c = cands()
-    assert _recommend(c, "unexplained", [])["name"] == "sparse geometry"  # within 10 of 100, fewer parameters
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "sparse geometry"  # within 10 of 100, fewer parameters
     assert [x["name"] for x in c if x["recommended"]] == ["sparse geometry"]
     c = cands()
     c[4]["cv_chi2"] = 111.0
-    assert _recommend(c, "unexplained", [])["name"] == "generic geometry"  # 11 worse: not a tie
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "generic geometry"  # 11 worse: not a tie
+    c = cands()
+    c[4]["set_aside"] = "a poor fit"
+    c[3]["set_aside"] = "not singled out"
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "imu_tilt"  # the set-aside fits are no estimates
+    c = cands()
+    c[1]["cv_chi2"] = c[4]["cv_chi2"] = 600.0
+    c[3]["cv_chi2"] = 500.0 - 38 * ln_n + 1  # better, by less than its 38 extra parameters x ln(n)
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "offsets only"
+    c[3]["cv_chi2"] -= 2  # by more
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "generic geometry"
     c = cands()
     for x in c:
         x["cv_chi2"] = None
-    assert _recommend(c, "unexplained", [])["name"] == "offsets only"  # one stance: no cross-validation
+    assert _recommend(c, "unexplained", [], ln_n)["name"] == "offsets only"  # one stance: no cross-validation
 
 
 def test_a_tilted_knee_axis_is_one_tilt_column_and_its_offsets_stay_at_the_floor(tmp_path):
