@@ -425,6 +425,7 @@ def cmd_diagnose(a: argparse.Namespace) -> int:
     md = markdown(report, made_by, describe(code), truth, walks)
     write_report(a.out, md, data, name="diagnosis")
     plot(report, Path(a.out) / "trace.png")
+    print(report["verdict_line"])
     print(report["summary"])
     if truth:
         print(f"offsets RMS error vs truth: {truth['before']:.4f} deg -> {truth['after']:.4f} deg")

@@ -769,6 +769,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         "_candidate_models": {c["name"]: (list(c["ev"].fit.model.effects), c["ev"].fit.x) for c in cands},
     }
     report["summary"] = summary_line(report)
+    report["verdict_line"] = verdict_line(report)
     return report
 
 
@@ -831,6 +832,31 @@ def _recommend(cands: list[dict], verdict: str, selected, ln_n: float) -> dict:
         best = base
     best["recommended"] = True
     return best
+
+
+def verdict_line(rep: dict) -> str:
+    """The diagnosis in one short line a robot engineer acts on: the estimate to apply
+    and why, in a few words (the long account: `summary_line`)."""
+    rec = next((c for c in rep.get("candidates", []) if c.get("recommended")), None)
+    name = "the offsets only" if rec is None or rec.get("kind") == "offsets" else f"{rec['name']}'s offsets"
+    v = rep["verdict"]
+    if v == "explained":
+        why = "the offsets explain these data within the declared noise"
+    elif v == "selected":
+        a = rep["after"]
+        why = (f"the data single out {' + '.join(rep['selected'])} (chi2/dof "
+               f"{rep['detection']['chi2_per_dof']:.3f} -> {a['chi2_per_dof']:.3f})")
+    elif v == "ambiguous":
+        why = f"{' or '.join(a['effect'] for a in rep['ambiguous'])} explain it about equally: not one named"
+    else:
+        g = rep.get("generic")
+        why = ("no library effect explains the residual"
+               + ("; a change of the robot's geometry does" if g and g.get("explains") else ""))
+    if v != "selected" and rec is not None:
+        why += ("; no other estimate predicts the left-out stances better by the margin" if rec.get("kind") == "offsets"
+                and len(rep.get("candidates", [])) > 1 and rec.get("cv_chi2") is not None else
+                "; it predicts the left-out stances best" if rec.get("kind") != "offsets" else "")
+    return f"{v}: apply {name}: {why}"
 
 
 def summary_line(rep: dict) -> str:

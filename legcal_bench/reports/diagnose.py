@@ -167,7 +167,7 @@ def rules_text(report: dict) -> str:
 def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: dict | None = None) -> str:
     d, a = report["detection"], report["after"]
     L = [f"# Model-gap diagnosis: {report['verdict']}", "", f"Made by `{made_by}` ({code}).", "",
-         f"**{report['summary']}**", "",
+         f"**{report.get('verdict_line') or report['summary']}**", "", report["summary"], "",
          f"| | offsets only | {'after the selection' if report['steps'] else 'after'} |", "|---|---|---|",
          f"| chi2 / dof (training) | {d['chi2_per_dof']:.4f} (p = {d['p_value']:.2g}) | "
          f"{a['chi2_per_dof']:.4f} (p = {a['p_value']:.2g}) |"]
@@ -247,19 +247,27 @@ def plot(report: dict, path: Path) -> Path:
     cv = report["detection"].get("cross_validation", {})
     fig, axes = plt.subplots(1, 5 if len(cands) > 1 and cv.get("dof") else 4, figsize=(22, 4.4))
     tr = [("offsets only", report["tracing"])]
-    if report.get("tracing_after"):
-        tr.append(("after (set aside: a poor fit)" if report.get("poor_fit") else "after", report["tracing_after"]))
+    if report.get("tracing_after") and report.get("selected"):  # a set-aside fit is no result: not drawn
+        tr.append((f"after: {' + '.join(report['selected'])}", report["tracing_after"]))
     top: list[str] = []  # the offsets-only fit's strongest signatures, shown for both fits
     for k, (label, t) in enumerate(tr):
         w = 0.4
         for ax, key, val in ((axes[0], "channels", "ratio"), (axes[1], "stances", "ratio")):
             names = list(t[key])
             ax.bar(np.arange(len(names)) + (k - 0.5) * w, [t[key][n][val] for n in names], w, label=label)
-            ax.set_xticks(np.arange(len(names)), names, rotation=30, fontsize=7)
+            ax.set_xticks(np.arange(len(names)), names, rotation=40, ha="right", rotation_mode="anchor", fontsize=7)
         names = list(t["locations"])
-        axes[2].bar(np.arange(len(names)) + (k - 0.5) * w,
-                    [max(t["locations"][n]["excess"], 1e-1) for n in names], w, label=label)
-        axes[2].set_xticks(np.arange(len(names)), names, fontsize=8)
+        excess = np.array([t["locations"][n]["excess"] for n in names])
+        x = np.arange(len(names)) + (k - 0.5) * w
+        bars = axes[2].bar(x, np.maximum(excess, LOG_FLOOR), w, label=label)
+        for b, e in zip(bars, excess):  # at or below the log axis's floor: drawn hollow, said so
+            if e <= LOG_FLOOR:
+                b.set_fill(False)
+                b.set_hatch("//")
+                axes[2].text(b.get_x() + b.get_width() / 2, LOG_FLOOR * 1.15, f"<={LOG_FLOOR:g}", ha="center",
+                             fontsize=6)
+        axes[2].set_xticks(np.arange(len(names)), names, rotation=20, ha="right", rotation_mode="anchor",
+                           fontsize=8)
         sig = {f"{fam}: {s['joint'].replace('_joint', '')}": s["excess"] for fam, ss in t["signatures"].items()
                for s in ss}
         top = top or sorted(sig, key=lambda n: -sig[n])[:8]
@@ -282,13 +290,19 @@ def plot(report: dict, path: Path) -> Path:
                                               for c in cands], fontsize=7)
         ax.invert_yaxis()
         ax.axvline(1, color="k", lw=0.8, ls="--")
-        ax.set_xlim(0.9 * min(min(vals), 1.0), 1.05 * max(vals))
+        ax.set_xlim(0, 1.2 * max(vals))  # from zero: a bar's length is its value
+        for i, v in enumerate(vals):
+            ax.text(v, i, f" {v:.3f}", va="center", fontsize=6)
         ax.set_title("left-out chi2 / dof (green: recommended)", fontsize=9)
     handles, labels = axes[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=7, frameon=False)  # clear of the bars
     import textwrap
 
-    title = textwrap.wrap(report["summary"], 170)
-    fig.suptitle("\n".join(title[:3]) + (" ..." if len(title) > 3 else ""), fontsize=8)
-    fig.tight_layout(rect=(0, 0.06, 1, 1 - 0.04 * min(len(title), 3)))
+    # The short verdict line (the long account is the report's): never cut, wrapped to the width.
+    title = textwrap.wrap(report.get("verdict_line") or report["summary"], 150)
+    fig.suptitle("\n".join(title), fontsize=9)
+    fig.tight_layout(rect=(0, 0.06, 1, 1 - 0.045 * len(title)))
     return save_figure(fig, path)
+
+
+LOG_FLOOR = 0.1  # the location panel's log axis starts here; an excess at or below it is drawn hollow

@@ -451,3 +451,24 @@ def test_the_offsets_covariance_carries_the_imu_vertical_within_its_declared_bou
     held = Evaluated(types.SimpleNamespace(model=model, held=["e"]), np.zeros(200), Jw[:, :3], 0.0, 0, 200,
                      np.zeros(3), tilt=tilt)
     assert offsets_cov(types.SimpleNamespace(noise={}), held) == pytest.approx(np.linalg.inv(Jw[:, :3].T @ Jw[:, :3]))
+
+
+def test_the_verdict_line_says_what_to_apply_and_why_in_a_few_words():
+    # Issue #61: the ~1,000-character summary mixed "set aside" and "recommended"; the
+    # verdict line names the one estimate to apply.
+    from legcal_bench.evaluation.modelgap import verdict_line
+
+    base = {"name": "offsets only", "kind": "offsets", "cv_chi2": 500.0, "recommended": True}
+    poor = {"name": "imu_tilt", "kind": "effects", "cv_chi2": 400.0, "recommended": False, "set_aside": "a poor fit"}
+    rep = {"verdict": "unexplained", "candidates": [base, poor], "generic": {"explains": False},
+           "detection": {"chi2_per_dof": 1.4}, "after": {"chi2_per_dof": 1.3}, "selected": [], "ambiguous": []}
+    line = verdict_line(rep)
+    assert line == ("unexplained: apply the offsets only: no library effect explains the residual; no other estimate "
+                    "predicts the left-out stances better by the margin")
+    assert "imu_tilt" not in line and len(line) < 160
+    base["recommended"], poor["recommended"] = False, True
+    poor.pop("set_aside")
+    rep.update(verdict="selected", selected=["imu_tilt"])
+    assert verdict_line(rep) == "selected: apply imu_tilt's offsets: the data single out imu_tilt (chi2/dof 1.400 -> 1.300)"
+    rep.update(verdict="explained", candidates=[dict(base, recommended=True)])
+    assert verdict_line(rep) == "explained: apply the offsets only: the offsets explain these data within the declared noise"
