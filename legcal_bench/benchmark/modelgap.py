@@ -576,14 +576,19 @@ def summarize(rows: list[dict]) -> list[dict]:
             rs = [r for r in rr if r["kind"] == "outside" and r["name"] == o]
             if not rs:
                 continue
-            leg = [r["localization"]["location"] == f"{r['side']} leg" for r in rs]
+            # a leg claimed (no tie with another location), and whether it is the edited one
+            tied = [bool(r["localization"].get("tied_with")) for r in rs]
+            leg = [r["localization"]["location"] == f"{r['side']} leg" and not t for r, t in zip(rs, tied)]
             chan = [refs.get((o, r["side"])) is not None
                     and r["localization"]["channel"] == refs[(o, r["side"])]["channel"] for r in rs]
             unexplained = [r["verdict"] == "unexplained" for r in rs]
             out.append({"robot": robot, "case": f"outside: {o}", "seeds": len(rs),
                         "unexplained": sum(unexplained),
                         "unexplained_leg_and_channel": sum(u and a and b for u, a, b in zip(unexplained, leg, chan)),
-                        "leg_correct": sum(leg), "channel_as_reference": sum(chan),
+                        "leg_correct": sum(leg), "tied": sum(tied),
+                        "other_leg_claimed": sum(r["localization"]["location"].endswith(" leg") and not t
+                                                 and not ok for r, t, ok in zip(rs, tied, leg)),
+                        "channel_as_reference": sum(chan),
                         "reference_channels": sorted({v["channel"] for (n, _), v in refs.items() if n == o}),
                         "wrong_confident": sum(bool(r["selected"]) for r in rs),
                         "verdicts": _count(r["verdict"] for r in rs)})
@@ -870,6 +875,7 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         elif s["case"].startswith("outside"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['unexplained']} unexplained | "
                      f"{s['unexplained_leg_and_channel']}/{s['seeds']} with leg and channel (leg {s['leg_correct']}, "
+                     f"tie {s.get('tied', '–')}, the other leg {s.get('other_leg_claimed', '–')}, "
                      f"channel {s['channel_as_reference']}; reference {', '.join(s['reference_channels'])}) | "
                      f"{s['wrong_confident']} | – | – | – | – | {v} |")
         else:

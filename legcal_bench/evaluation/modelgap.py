@@ -945,17 +945,38 @@ def _recommended_text(rep: dict) -> str:
     return text
 
 
+SENSOR_LIKE = {"motion": "following the motion's direction: a transmission effect (backlash, friction) or an "
+                         "encoder's lag, not the geometry",
+               "drift": "growing with time within each segment: a sensor's drift (an encoder's, a temperature's), "
+                        "not the geometry",
+               "time": "drifting with time in every row: a sensor's drift or the robot settling, not the geometry"}
+
+
 def _signature_text(tracing: dict) -> str:
-    """The signature (angle, load, motion, time) explaining the most of the residual per
-    parameter it spends, in words: per parameter, since the time signature's many columns
-    (11 per segment) take a large share of any residual."""
-    best = max(((fam, sig) for fam, sigs in tracing.get("signatures", {}).items() for sig in sigs if sig["dof"] > 0),
+    """The signature (angle, load, motion, drift, time) explaining the most of the
+    residual per parameter it spends, in words (per parameter, since the time
+    signature's many columns, 11 per segment, take a large share of any residual); one
+    following motion or time is named a sensor or transmission effect, and one every
+    joint of both legs shares (its excess within a factor 2 on all of them, the
+    residual in both legs) a sensor-like effect common to every joint."""
+    sigs = tracing.get("signatures", {})
+    best = max(((fam, sig) for fam, ss in sigs.items() for sig in ss if sig["dof"] > 0),
                key=lambda fs: fs[1]["excess"] / fs[1]["dof"], default=None)
     if best is None or best[1]["excess"] <= 0:
         return ""
     fam, sig = best
-    what = "a drift in time within each segment" if fam == "time" else f"{fam} of {sig['joint'].replace('_joint', '')}"
-    return f"; its strongest signature: {what} (excess chi2 {sig['excess']:.0f} on {sig['dof']} dof)"
+    joint = sig["joint"].replace("_joint", "")
+    what = "a drift in time within each segment" if fam == "time" else f"{fam} of {joint}"
+    out = f"; its strongest signature: {what} (excess chi2 {sig['excess']:.0f} on {sig['dof']} dof)"
+    per = sigs.get(fam, [])
+    every = (fam != "time" and len(per) > 1
+             and min(s["excess"] for s in per) > 0.5 * max(s["excess"] for s in per)
+             and tracing.get("localization", {}).get("location") == BOTH_LEGS)
+    if every:
+        out += f", on every joint alike: a sensor-like effect common to every joint ({fam}), not one leg's geometry"
+    elif fam in SENSOR_LIKE:
+        out += f": {SENSOR_LIKE[fam]}"
+    return out
 
 
 def trace(ctx: Context, ev: Evaluated) -> dict:
@@ -993,10 +1014,24 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
     for name, C in groups.items():
         d, dof = score_beyond(zr, Qn, C, ctx.resolution)
         out["locations"][name] = {"delta_chi2": d, "dof": dof, "excess": d - dof, "log10_p": _log10_sf(d, dof)}
-    # Signatures per joint.
-    values = {"angle": fr.q_enc, "load": _loads(ctx, fr), "motion": _motion(ctx, fr)}
+    # Each pair of locations together: what one explains beyond the other (`localize`).
+    pairs = {}
+    for i, a in enumerate(groups):
+        for b in list(groups)[i + 1:]:
+            d, dof = score_beyond(zr, Qn, np.hstack([groups[a], groups[b]]), ctx.resolution)
+            pairs[f"{a} + {b}"] = {"delta_chi2": d, "dof": dof}
+    out["location_pairs"] = pairs
+    # Signatures per joint: its reading's error following its angle, its load, its motion
+    # direction, or time within each segment (a drift: a sensor's, not the geometry's).
+    t = np.array([ctx.recordings[r].time[i] for r, i in zip(fr.recording, fr.time_index)]) \
+        if all(r in ctx.recordings for r in set(fr.recording)) else fr.time_index.astype(float)
+    tc = t.copy()
+    for s in np.unique(fr.segment):
+        tc[fr.segment == s] -= t[fr.segment == s].mean()
     names = list(ctx.prep.robot.joint_names)
-    for fam in FAMILIES:
+    values = {"angle": fr.q_enc, "load": _loads(ctx, fr), "motion": _motion(ctx, fr),
+              "drift": np.repeat(tc[:, None], len(names), axis=1)}
+    for fam in (*FAMILIES, "drift"):
         v = values[fam]
         if v is None:
             continue
@@ -1007,39 +1042,97 @@ def trace(ctx: Context, ev: Evaluated) -> dict:
             per.append({"joint": names[j], "delta_chi2": d, "dof": dof, "excess": d - dof,
                         "log10_p": _log10_sf(d, dof)})
         out["signatures"][fam] = per
-    t = np.array([ctx.recordings[r].time[i] for r, i in zip(fr.recording, fr.time_index)]) \
-        if all(r in ctx.recordings for r in set(fr.recording)) else fr.time_index.astype(float)
     d, dof = score_beyond(zr, Qn, whiten(time_columns(fr.segment, t)), ctx.resolution)
     out["signatures"]["time"] = [{"joint": "(every row, per segment)", "delta_chi2": d, "dof": dof,
                                   "excess": d - dof, "log10_p": _log10_sf(d, dof)}]
     chan = max(out["channels"], key=lambda k: out["channels"][k]["ratio"])
-    out["localization"] = {**localize(out["locations"]), "channel": chan,
+    out["localization"] = {**localize(out["locations"], pairs), "channel": chan,
                            "channel_ratio": out["channels"][chan]["ratio"]}
     return out
 
 
-def localize(locations: dict) -> dict:
+BOTH_LEGS = "both legs"
+
+
+def _pair(pairs: dict, a: str, b: str) -> dict:
+    return pairs.get(f"{a} + {b}") or pairs[f"{b} + {a}"]
+
+
+def _beyond(locations: dict, pairs: dict, a: str, b: str) -> dict:
+    """What location `a` explains beyond `b` (the likelihood ratio of both together
+    against `b` alone, to first order: the score test of a's columns beyond b's)."""
+    j = _pair(pairs, a, b)
+    d, dof = j["delta_chi2"] - locations[b]["delta_chi2"], j["dof"] - locations[b]["dof"]
+    return {"delta_chi2": float(d), "dof": int(dof), "log10_p": _log10_sf(max(d, 0.0), dof) if dof > 0 else 0.0}
+
+
+def localize(locations: dict, pairs: dict | None = None) -> dict:
     """The location explaining the most beyond what its parameters would take from noise,
-    and the locations it cannot be told from: those whose excess is within
-    `AMBIGUOUS_BIC` of it (the selection's decisive margin; the same number of
-    parameters on each side). The two legs' generic geometries often tie: moving one
-    hip's mounting point by +d is, in inter-foot data, moving the other's by -d."""
+    judged against each alternative by what it explains beyond it (`pairs`: each two
+    locations' columns together; `_beyond`), at family-wise ALPHA over the tests:
+    - an alternative the best adds nothing significant beyond is a tie (`tied_with`):
+      the data cannot tell them apart (moving one hip's mounting point by +d is, in
+      inter-foot data, moving the other's by -d; a sole's height is either sole's);
+    - an alternative that adds significantly beyond the best is a location too
+      (`also_in`); the other leg among them makes the location "both legs" (an effect of
+      every joint, or of both legs, is not one leg's).
+    Without `pairs` (rows made before issue #61): excesses within `AMBIGUOUS_BIC` tie."""
     best = max(locations, key=lambda k: locations[k]["excess"])
-    ties = [k for k in locations if k != best and locations[best]["excess"] - locations[k]["excess"] < AMBIGUOUS_BIC]
-    return {"location": best, "log10_p": locations[best]["log10_p"], "tied_with": ties,
-            "margin": min((locations[best]["excess"] - locations[k]["excess"] for k in locations if k != best),
-                          default=float("inf"))}
+    margin = min((locations[best]["excess"] - locations[k]["excess"] for k in locations if k != best),
+                 default=float("inf"))
+    if pairs is None:
+        ties = [k for k in locations if k != best
+                and locations[best]["excess"] - locations[k]["excess"] < AMBIGUOUS_BIC]
+        return {"location": best, "log10_p": locations[best]["log10_p"], "tied_with": ties, "margin": margin}
+    level = np.log10(ALPHA / (2 * max(len(locations) - 1, 1)))
+    for _ in locations:  # an alternative that holds all the best does and more is the best
+        better = [k for k in locations if k != best and _beyond(locations, pairs, best, k)["log10_p"] >= level
+                  and _beyond(locations, pairs, k, best)["log10_p"] < level]
+        if not better:
+            break
+        best = better[0]
+    evidence, ties, also = {}, [], []
+    for k in locations:
+        if k == best:
+            continue
+        ev = {"best_beyond": _beyond(locations, pairs, best, k), "beyond_best": _beyond(locations, pairs, k, best)}
+        evidence[k] = ev
+        if ev["best_beyond"]["log10_p"] >= level:
+            ties.append(k)
+        elif ev["beyond_best"]["log10_p"] < level:
+            also.append(k)
+    legs = [k for k in also if k.endswith(" leg")]
+    location = BOTH_LEGS if best.endswith(" leg") and legs else best
+    return {"location": location, "strongest": best, "log10_p": locations[best]["log10_p"], "tied_with": ties,
+            "also_in": [k for k in also if not (location == BOTH_LEGS and k.endswith(" leg"))],
+            "evidence": evidence, "margin": margin}
 
 
 def where_text(where: dict) -> str:
-    """The localization in words: a location, or a tie and why it cannot be broken."""
-    if not where.get("tied_with"):
+    """The localization in words: a location with its evidence against the alternatives,
+    both legs, or a tie and why it cannot be broken."""
+    ev = where.get("evidence")
+    if where.get("tied_with"):
+        places = " or ".join([where.get("strongest", where["location"]), *where["tied_with"]])
+        legs = all(p.endswith("leg") for p in places.split(" or "))
+        why = (f"what one explains beyond the other is noise (p >= {ALPHA:g} family-wise)" if ev else
+               f"chi2 within {AMBIGUOUS_BIC:g} of each other")
+        return (f"it lives in the {places}: a tie ({why})"
+                + ("; the data cannot tell the legs apart: moving one hip's mounting by +d is, in inter-foot data, "
+                   "moving the other's by -d" if legs else ""))
+    if not ev:
         return f"it lives in the {where['location']} (by {where['margin']:.0f} of chi2 over the next location)"
-    places = " or ".join([where["location"], *where["tied_with"]])
-    legs = all(p.endswith("leg") for p in [where["location"], *where["tied_with"]])
-    return (f"it lives in the {places}: a tie (chi2 within {AMBIGUOUS_BIC:g} of each other)"
-            + ("; the data cannot tell the legs apart: moving one hip's mounting by +d is, in inter-foot data, "
-               "moving the other's by -d" if legs else ""))
+    also = f", and in the {' and the '.join(where['also_in'])}" if where.get("also_in") else ""
+    if where["location"] == BOTH_LEGS:
+        other = next(k for k in ev if k.endswith(" leg"))
+        e = ev[other]
+        return (f"it lives in both legs{also}: each leg's geometry explains what the other's cannot "
+                f"(chi2 {e['best_beyond']['delta_chi2']:.0f} and {e['beyond_best']['delta_chi2']:.0f} beyond "
+                f"each other): an effect of both legs or of every joint, not one leg's")
+    k, e = min(ev.items(), key=lambda kv: kv[1]["best_beyond"]["delta_chi2"])
+    return (f"it lives in the {where['location']}{also} (beyond the {k}'s it explains chi2 "
+            f"{e['best_beyond']['delta_chi2']:.0f} on {e['best_beyond']['dof']} dof, p = "
+            f"1e{e['best_beyond']['log10_p']:.0f}; the {k} adds {e['beyond_best']['delta_chi2']:.0f} beyond it)")
 
 
 def _structured(tracing: dict) -> bool:
@@ -1049,7 +1142,18 @@ def _structured(tracing: dict) -> bool:
 
 
 def _log10_sf(x: float, dof: int) -> float:
-    return float(chi2_dist.logsf(x, max(dof, 1)) / np.log(10)) if dof > 0 else 0.0
+    """log10 of the chi-square's upper tail; where it underflows, its leading asymptotic
+    term (the upper incomplete gamma Gamma(a, y) ~ y^(a-1) e^-y / Gamma(a), a = dof/2,
+    y = x/2): finite, so very strong evidence still orders."""
+    if dof <= 0:
+        return 0.0
+    v = float(chi2_dist.logsf(x, dof))
+    if np.isfinite(v):
+        return v / np.log(10)
+    from scipy.special import gammaln
+
+    a, y = dof / 2.0, x / 2.0
+    return float(((a - 1.0) * np.log(y) - y - gammaln(a)) / np.log(10))
 
 
 def _extra_columns(ctx: Context, fit, effects) -> list[np.ndarray]:

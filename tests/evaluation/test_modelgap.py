@@ -209,6 +209,38 @@ def test_a_tie_between_the_legs_is_reported_as_a_tie_with_its_reason():
     assert "tie" not in where_text(clear) and "by 1000 of chi2" in where_text(clear)
 
 
+def test_localization_weighs_each_location_by_what_it_explains_beyond_the_other():
+    """Issue #61: each location against the best alternative by what it explains beyond
+    it (the score test of both together against the alternative alone). A change the
+    other leg's geometry explains as well (the mirrored mount) is a tie, whatever the
+    excesses' order; an effect each leg's geometry explains a part of the other cannot
+    (every joint) is "both legs"; one leg is named only when the other adds nothing."""
+    from legcal_bench.evaluation.modelgap import BOTH_LEGS, localize, where_text
+
+    def locs(left, right, imu=3.0, dof=21):
+        return {"left leg": {"delta_chi2": left, "dof": dof, "excess": left - dof, "log10_p": -left / 10},
+                "right leg": {"delta_chi2": right, "dof": dof, "excess": right - dof, "log10_p": -right / 10},
+                "IMU": {"delta_chi2": imu, "dof": 2, "excess": imu - 2, "log10_p": -0.3}}
+
+    def pairs(lr, l_imu, r_imu, dof=42):
+        return {"left leg + right leg": {"delta_chi2": lr, "dof": dof},
+                "left leg + IMU": {"delta_chi2": l_imu, "dof": 23}, "right leg + IMU": {"delta_chi2": r_imu, "dof": 23}}
+
+    # The mirrored mount: either leg explains 22345, both together no more than noise beyond.
+    mirror = localize(locs(22345.0, 22344.0), pairs(22360.0, 22348.0, 22347.0))
+    assert mirror["tied_with"] == ["right leg"] and "a tie" in where_text(mirror) and "+d" in where_text(mirror)
+    # A right-leg effect the left leg's geometry explains a part of: by 2913 of excess
+    # the right, and the left adds nothing beyond it: the right leg.
+    one = localize(locs(1000.0, 3913.0), pairs(3930.0, 1003.0, 3916.0))
+    assert one["location"] == "right leg" and one["tied_with"] == [] and one["also_in"] == []
+    assert "it lives in the right leg" in where_text(one) and "adds 17 beyond it" in where_text(one)
+    # Every joint of both legs: each leg explains 3000 the other cannot.
+    both = localize(locs(4000.0, 4340.0), pairs(7340.0, 4003.0, 4343.0))
+    assert both["location"] == BOTH_LEGS and "not one leg's" in where_text(both)
+    # Excesses 340 apart said nothing before: the right leg was named "by 340 of chi2".
+    assert localize(locs(4000.0, 4340.0))["location"] == "right leg"
+
+
 def _short_set(tmp_path, effect, seed):
     lm = load_robot("a3")
     collect(CollectConfig(robot="a3", mode="kinematic", sensors="calibrated-imu", seed=seed, stance_s=4.0,
