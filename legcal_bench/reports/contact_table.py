@@ -156,6 +156,11 @@ def summarize(rows: list[dict]) -> list[dict]:
             out.append({
                 "robot": robot, "case": case, "sets": len(rs), "failed": failed, "stances": n_st, "truly_off": off,
                 "flagged_truly_off": tp, "flagged_not_off": fp,
+                # sets: any stance flagged that is not truly off (an alarm on clean data);
+                # the wedge's stance flagged (caught)
+                "sets_alarmed": sum(bool(set(r["flagged"]) - set(r["truly_off"])) for r in rs),
+                "sets_flagged": sum(bool(r["flagged"]) for r in rs),
+                "wedge_caught": sum(r["wedge_stance"] in r["flagged"] for r in wedge) if wedge else None,
                 "wedge_sole_named": f"{sum(named)}/{len(wedge)}" if wedge else "–",
                 "median_tilt_error_deg": float(np.median([s["tilt_error_deg"] for s in flagged_st]))
                 if flagged_st else None,
@@ -185,20 +190,57 @@ def markdown(data: dict, made_by: str, code: str) -> str:
              "check's size floor). Errors: the flagged stances' estimated departure against the truth's. Offsets: "
              "RMS error (deg) of the fit with every stance (`contact_check=flag`) and without the flagged ones "
              "(`drop`), mean over sets. chi2/dof: the test's median over the stances (about 1 where its noise model "
-             "holds); true departure: the truth's RMS per tilt axis and of the height over the stances.", "",
-             "| robot | case | sets | stances | truly off | flagged, truly off | flagged, not off | wedge's sole named "
+             "holds); true departure: the truth's RMS per tilt axis and of the height over the stances. Sets alarmed: "
+             "sets with a stance flagged that the truth does not put off one plane (a false alarm); wedge caught: "
+             "sets whose wedged stance is flagged. Not held: sets the robot could not hold or reach (a wedge in "
+             "pitch on legs without an ankle roll).", "", *rates_lines(data["summary"]), "",
+             "| robot | case | sets | stances | truly off | flagged, truly off | flagged, not off | sets alarmed "
+             "| wedge caught | wedge's sole named "
              "| median tilt error (deg) | median height error (mm) | chi2/dof | true departure (deg, mm) "
              "| offsets flag | offsets drop |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for s in data["summary"]:
         if not s["sets"]:
-            lines.append(f"| {s['robot']} | {s['case']} | 0 ({s['failed']} not held) |" + " – |" * 11)
+            lines.append(f"| {s['robot']} | {s['case']} | 0 ({s['failed']} not held) |" + " – |" * 13)
             continue
         sets = f"{s['sets']}" + (f" (+{s['failed']} not held)" if s["failed"] else "")
         te = "–" if s["median_tilt_error_deg"] is None else f"{s['median_tilt_error_deg']:.4f}"
         he = "–" if s["median_abs_height_error_mm"] is None else f"{s['median_abs_height_error_mm']:.3f}"
         lines.append(f"| {s['robot']} | {s['case']} | {sets} | {s['stances']} | {s['truly_off']} | "
-                     f"{s['flagged_truly_off']} | {s['flagged_not_off']} | {s['wedge_sole_named']} | {te} | {he} | "
+                     f"{s['flagged_truly_off']} | {s['flagged_not_off']} | {s.get('sets_alarmed', '–')} | "
+                     f"{'–' if s.get('wedge_caught') is None else s['wedge_caught']} | {s['wedge_sole_named']} | {te} | {he} | "
                      f"{s['median_chi2_per_dof']:.2f} | {s['true_tilt_rms_deg']:.4f}, {s['true_height_rms_mm']:.3f} | "
                      f"{s['offsets_rms_deg_flag']:.4f} | {s['offsets_rms_deg_drop']:.4f} |")
     return "\n".join(lines) + "\n"
+
+
+def rates_lines(summary: list[dict]) -> list[str]:
+    """The check's rates over every robot: false alarms on the sets without a planted
+    defect (per kind: kinematic, weld, contact), the wedges caught per size."""
+    def share(a: int, n: int) -> str:
+        return f"{a / n:.1%}" if n else "–"
+
+    def kind(case: str) -> str:
+        base = case.removesuffix(REALISTIC).removesuffix(RANDOM)
+        return "wedge " + base.split()[1] if base.startswith("wedge") else {"clean": "weld"}.get(base, base)
+
+    clean, wedge = {}, {}
+    for s in summary:
+        if not s["sets"]:
+            continue
+        k = kind(s["case"])
+        if k.startswith("wedge"):
+            w = wedge.setdefault(k, [0, 0])
+            w[0], w[1] = w[0] + s["wedge_caught"], w[1] + s["sets"]
+        else:
+            c = clean.setdefault(k, [0, 0, 0])
+            c[0], c[1], c[2] = c[0] + s["sets_alarmed"], c[1] + s["sets"], c[2] + s["sets_flagged"]
+    out = []
+    if clean:
+        a, n = sum(v[0] for v in clean.values()), sum(v[1] for v in clean.values())
+        out.append(f"- Sets without a planted defect alarmed (a stance flagged the truth does not put off one plane): "
+                   f"{a}/{n} ({share(a, n)}): " + ", ".join(f"{k} {v[0]}/{v[1]} (any stance flagged: {v[2]})"
+                                                           for k, v in clean.items()) + ".")
+    for k, (c, n) in wedge.items():
+        out.append(f"- {k.split()[1]} deg wedges caught: {c}/{n} ({share(c, n)}).")
+    return out

@@ -32,3 +32,23 @@ def test_the_summary_reads_the_tests_calibration_and_the_truths_departure():
     assert s["true_tilt_rms_deg"] == pytest.approx(np.sqrt(4 / 6) * 0.002, rel=1e-9)
     assert s["true_height_rms_mm"] == pytest.approx(1e3 * np.sqrt(2e-10 / 3), rel=1e-9)
     assert "| 2.00 | 0.0016, 0.008 |" in markdown({"summary": [s]}, "cmd", "code")
+
+
+def test_the_cases_name_their_floor_and_offsets_and_the_rates_count_sets():
+    # Issue #60's grid: kinematic and random:3 cases; false alarms counted per set (a
+    # stance flagged the truth does not put off one plane), wedges caught per set.
+    from legcal_bench.reports.contact_table import case_offsets, rates_lines
+
+    assert case_spec("kinematic random:3 realistic", 3)[0] == "kinematic"
+    assert case_offsets("kinematic random:3 realistic", 3) == "random:3@3" and case_offsets("clean", 3) == "paper"
+    assert case_spec("wedge 0.3 random:3", 1)[1] == ("shim:side=right,roll=0.3,stance=II",)
+    clean = _row([3.0, 3.0], [[0.0, 0.0, 0.0]] * 2)
+    alarmed = dict(clean, seed=1, flagged=["stance_0"])
+    wedge = dict(clean, case="wedge 0.05 realistic", wedge_stance="stance_1", wedge_side="left",
+                 truly_off=["stance_1"], flagged=["stance_1"])
+    missed = dict(wedge, seed=1, flagged=[])
+    s = summarize([clean, alarmed, wedge, missed])
+    assert (s[0]["sets_alarmed"], s[0]["sets"]) == (1, 2) and s[1]["wedge_caught"] == 1
+    text = "\n".join(rates_lines(s))
+    assert "alarmed (a stance flagged the truth does not put off one plane): 1/2 (50.0%): contact 1/2" in text
+    assert "0.05 deg wedges caught: 1/2 (50.0%)" in text
