@@ -216,7 +216,8 @@ def heldout_heights(legmap: LegMap, paths, effects, estimates: dict) -> dict | N
         ft = None if rec.ft is None else smooth_wrenches(rec.time, rec.ft)
         for key, x in estimates.items():
             x = np.asarray(x, dtype=float)
-            seg = EffectSegment(model, SegmentData(q, ft, up, q_ref=q + x[:model.n_offsets]))
+            seg = EffectSegment(model, SegmentData(q, ft, up, q_ref=q + x[:model.n_offsets],
+                                                   time=np.asarray(rec.time, dtype=float)))
             heights[key].append(foot_height_difference(seg.state(model.values(x)), up))
     if not kinds:
         return None

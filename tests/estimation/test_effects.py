@@ -84,3 +84,40 @@ def test_at_zero_parameters_the_extended_kinematics_is_the_plain_one(data):
     r0, J0 = ref.evaluate(x[:n_q])
     r1, J1 = problem.evaluate(x)
     assert np.abs(r1 - r0).max() < 1e-12 and np.abs(J1[:, :n_q] - J0).max() < 1e-9
+
+
+def test_an_effect_reads_its_frames_timestamps(tmp_path):
+    """Issue #61: an effect of motion or time needs the frames' times, in order; the
+    frames the selection kept are not always consecutive samples, so the index is no clock."""
+    import numpy as np
+
+    from legcal_bench.data.recording import load_session
+    from legcal_bench.estimation.modelgap.effects import Effect, EffectModel
+    from legcal_bench.estimation.problem.stance import StanceProblem, prepare_sensor
+    from legcal_bench.protocol.collect import CollectConfig, collect
+    from legcal_bench.robots import load_robot
+
+    seen = []
+
+    class Clock(Effect):
+        name = "clock"
+
+        def parameters(self, kin):
+            return [("rate", "rad/s")]
+
+        def joint_map(self, kin, seg):
+            seen.append(seg.time)
+            return np.zeros((len(seg.q_enc), kin.legmap.n_joints, 1))
+
+    lm = load_robot("a3")
+    collect(CollectConfig(robot="a3", mode="kinematic", seed=0, stance_s=4.0, heldout=0), tmp_path / "s",
+            progress=False)
+    recs = load_session(tmp_path / "s", robot=lm)
+    prep = prepare_sensor(lm, [r for r in recs if r.kind in ("stance", "standing")])
+    times = {r.name: np.asarray(r.time) for r in recs}
+    for seg in prep.segments:
+        assert np.array_equal(seg.time, times[seg.recording][seg.frames])
+        assert np.all(np.diff(seg.time) > 0)
+    StanceProblem(prep.kin, prep.segments, prep.w, model=EffectModel(prep.kin, [Clock()]), q_ref=np.zeros(lm.n_joints))
+    assert len(seen) == len(prep.segments)
+    assert all(np.array_equal(t, s.time) for t, s in zip(seen, prep.segments))

@@ -40,12 +40,16 @@ ENTRY_POINT_GROUP = "legcal_bench.effects"
 
 @dataclass
 class SegmentData:
-    """What an effect may read of one contact segment's frames."""
+    """What an effect may read of one contact segment's frames, in time order. The frames
+    are those the frame selection kept (static, in contact, not trimmed): samples of one
+    recording, increasing in time but not always consecutive, so an effect of motion or
+    time reads `time`, never the index."""
 
     q_enc: np.ndarray  # (N, n), n the leg joints
     ft: np.ndarray | None = None  # (N, 2, 6) ankle wrenches [force, torque] in each F/T frame
     up_B: np.ndarray | None = None  # (N, 3) the IMU's vertical in the pelvis frame
     q_ref: np.ndarray | None = None  # (N, n) the angles at which loads are evaluated (default q_enc)
+    time: np.ndarray | None = None  # (N,) the frames' timestamps, s, increasing (None: not given)
 
 
 class Effect(ABC):

@@ -174,7 +174,8 @@ class FitOptions:
 class Segment:
     """One contact segment's frames: encoder angles, the IMU's up vector in the pelvis
     frame and the levelling rotations, the frames' sample indices, the ankle wrenches
-    (N, 2, 6) if recorded, and the stance recording it comes from."""
+    (N, 2, 6) if recorded, the stance recording it comes from and the frames' timestamps
+    (s, increasing; the frames the selection kept, so not always consecutive samples)."""
 
     name: str
     q_enc: np.ndarray
@@ -183,10 +184,12 @@ class Segment:
     frames: np.ndarray
     ft: np.ndarray | None = None
     recording: str = ""
+    time: np.ndarray | None = None
 
     def subset(self, keep: np.ndarray) -> "Segment":
         return Segment(self.name, self.q_enc[keep], self.up_B[keep], self.R_WB[keep], self.frames[keep],
-                       None if self.ft is None else self.ft[keep], self.recording)
+                       None if self.ft is None else self.ft[keep], self.recording,
+                       None if self.time is None else self.time[keep])
 
 
 def segments_of(kin: LegKinematics, recordings: list[Recording],
@@ -203,7 +206,8 @@ def segments_of(kin: LegKinematics, recordings: list[Recording],
             if r.ft is not None:  # smoothed over the segment's span: noisy loads bias a compliance low
                 a, b = int(s.frames.min()), int(s.frames.max()) + 1
                 ft = smooth_wrenches(r.time[a:b], r.ft[a:b])[s.frames - a]
-            segments.append(Segment(s.name, s.q_enc, up, levelling_rotations(up), s.frames, ft, r.name))
+            segments.append(Segment(s.name, s.q_enc, up, levelling_rotations(up), s.frames, ft, r.name,
+                                    np.asarray(r.time, dtype=float)[s.frames]))
     return segments, reports
 
 
@@ -316,7 +320,7 @@ class StanceProblem:
                 sk = SegmentKinematics(self.kin, seg.q_enc)
             else:
                 sk = EffectSegment(self.model, SegmentData(seg.q_enc, seg.ft, seg.up_B,
-                                                           q_ref=seg.q_enc + self.q_ref))
+                                                           q_ref=seg.q_enc + self.q_ref, time=seg.time))
             feet = InterFootTerm(f"{seg.name}/feet", sk, self.sf)
             self.feet.append(feet)
             terms += [feet, FlatGroundTerm(f"{seg.name}/flat", sk, seg.up_B, seg.R_WB, self.sg)]
