@@ -714,6 +714,9 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                                         "stances that move the effect's signature apart from the geometry's"}]
     if generic is not None and (set_aside or ambiguous or not selected):  # the verdict names the families
         generic["families"] = generic["_families"]()
+        if not generic["explains"]:  # as good as a whole that fails is no consistency with the data
+            for v in generic["families"].values():
+                v["as_good_as_the_whole"], v["consistent"] = v["consistent"], False
     partial = list(selected) if set_aside else []
     if ambiguous and selected:
         partial = list(selected)

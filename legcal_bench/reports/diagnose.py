@@ -117,8 +117,9 @@ def _generic_section(report: dict) -> list[str]:
         return L + ["", "(Families of geometry change not tested: the selection is claimed.)", ""]
     L += ["", "| family alone | parameters | delta chi2 vs the whole | dof | p | consistent |", "|---|---|---|---|---|---|"]
     for f, v in g["families"].items():
-        L.append(f"| {f} | {v['parameters']} | {v['delta_chi2']:.1f} | {v['dof']} | {v['p_value']:.2g} | "
-                 f"{'yes' if v['consistent'] else 'no'} |")
+        ok = ("yes" if v["consistent"] else "no (as good as the whole, which does not fit either)"
+              if v.get("as_good_as_the_whole") else "no")
+        L.append(f"| {f} | {v['parameters']} | {v['delta_chi2']:.1f} | {v['dof']} | {v['p_value']:.2g} | {ok} |")
     return L + [""]
 
 

@@ -504,3 +504,15 @@ def test_the_verdict_line_says_what_to_apply_and_why_in_a_few_words():
     assert verdict_line(rep) == "selected: apply imu_tilt's offsets: the data single out imu_tilt (chi2/dof 1.400 -> 1.300)"
     rep.update(verdict="explained", candidates=[dict(base, recommended=True)])
     assert verdict_line(rep) == "explained: apply the offsets only: the offsets explain these data within the declared noise"
+
+
+def test_a_family_as_good_as_a_whole_that_fails_is_not_called_consistent():
+    # Issue #61: both legs were marked "consistent" while the generic fit failed (p = 0).
+    from legcal_bench.reports.diagnose import _generic_section
+
+    g = {"parameters": 40, "of": 60, "chi2_per_dof": 1.9, "p_value": 0.0, "explains": False,
+         "families": {"the left leg's geometry": {"parameters": 20, "delta_chi2": 3.0, "dof": 20, "p_value": 0.99,
+                                                  "consistent": False, "as_good_as_the_whole": True}}}
+    text = "\n".join(_generic_section({"generic": g, "rules": {"ambiguous_bic": 10}}))
+    assert "it does not explain the data either" in text
+    assert "| no (as good as the whole, which does not fit either) |" in text and "| yes |" not in text
