@@ -474,8 +474,6 @@ REPORT_SECTIONS = (
     ("contact_holds", "contact_holds", "legcal_bench.reports.contact_holds", "Holding stances on the contact floor"),
     ("contact_holds_stand_ins", "contact_holds", "legcal_bench.reports.contact_holds",
      "Holding stances on the contact floor: the stand-ins"),
-    ("contact_check", "contact_table", "legcal_bench.reports.contact_table",
-     "The per-stance contact check: false alarms on clean sets, wedges caught"),
 )
 
 
