@@ -49,13 +49,18 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
     final: dict[str, StanceContact] = {}
     items, scale = _stance_items(prep, problem, dq, sig), 1.0
     while True:
-        raw = check_stances(items, sig["encoder"])
-        if len(raw) >= 3:  # judged at the shared misfit of the stances other than the worst
+        raw, worst = check_stances(items, sig["encoder"]), None
+        # judged at the shared misfit of the stances other than the worst; that scale is
+        # never below 1 (`shared_misfit`), so it can only clear flags: where no stance is
+        # flagged at the declared noise, the sub-problem it needs is not solved
+        if len(raw) >= 3 and not any(c.flagged for c in raw):
+            scale = 1.0
+        elif len(raw) >= 3:
             # the least consistent stance (log p, then chi2/dof where log p underflows too)
             worst = min(raw, key=lambda c: (chi2_dist.logsf(c.chi2, c.dof), -c.chi2 / c.dof)).recording
             sub, dq_sub, sub_items = _without(prep, problem, dq, sig, worst, weights)
             scale = shared_misfit([c.chi2 / c.dof for c in check_stances(sub_items, sig["encoder"])])
-        results = check_stances(items, sig["encoder"], scale=scale)
+        results = raw if scale == 1.0 else check_stances(items, sig["encoder"], scale=scale)
         bad = [c for c in results if c.flagged]
         if not bad or len(results) <= 2:
             final.update({c.recording: c for c in results})
