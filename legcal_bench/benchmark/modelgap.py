@@ -14,6 +14,9 @@ Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagno
   near          each library effect at a small fraction of its draw (NEAR_SCALES): the
                 near-threshold band, scored over the seeds whose offsets-only z is in NEAR_Z;
   multi         several small effects at once (MULTI_COUNT of them at MULTI_SCALE);
+  pair          two library effects at once, each at a realistic size (`PAIR`: a link
+                length with an IMU tilt), run with the multi cases (`--cases multi`):
+                named when both are selected and nothing else;
   outside       geometric edits no library effect describes (`OUTSIDE`: a mounting point,
                 axis offsets, axis directions; sizes per robot, `OUTSIDE_SIZE`), on every
                 robot run unless `outside_robots` (`bench --outside-robots`) names some:
@@ -106,6 +109,7 @@ REFERENCE_SCALE = 4.0
 NEAR_SCALES = (0.05, 0.5)  # the near-threshold band: this fraction of a realistic draw (log-uniform)
 NEAR_Z = (2.0, 10.0)  # ... scored over the seeds whose offsets-only post-fit z falls here
 MULTI_COUNT, MULTI_SCALE = 3, 0.25  # several small effects at once: 3 library effects, each at a quarter of its draw
+PAIR = ("leg_length", "imu_tilt")  # two library effects at once, each at a realistic size (issue #61)
 OUTSIDE_ROBOTS = None  # the robots the outside edits run on: None, every robot of the run (`run`)
 SIDES = ("left", "right")
 DEFAULT_CALIBRATOR = ("interfoot", ())  # (name, options as key-value pairs): the offsets each diagnosis starts from
@@ -224,6 +228,9 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     elif kind == "multi":
         specs = multi_specs(seed)
         name = "+".join(multi_effects(seed))
+    elif kind == "pair":
+        specs = tuple(library_spec(e, seed) for e in PAIR)
+        name = "+".join(PAIR)
     elif kind in ("outside", "reference"):
         spec, side = outside_spec(name, seed, REFERENCE_SCALE if kind == "reference" else 1.0, robot)
         specs = (spec,)
@@ -345,7 +352,7 @@ def _chi2_at_truth(ctx, truth) -> dict:
 CASES_DIR = Path("runs/bench/modelgap")  # `run`'s cases folder unless given (relative: the working directory)
 # Submission order (`run`): the long cases first, so that no worker is left with one at the
 # end (seconds a case, A3-like at commit 8ea50e6: a library effect ~60, clean ~15).
-COST = {"clean_kinematic": 1, "clean": 1, "reference": 1, "library": 4, "near": 4, "multi": 4, "outside": 4}
+COST = {"clean_kinematic": 1, "clean": 1, "reference": 1, "library": 4, "near": 4, "multi": 4, "pair": 4, "outside": 4}
 
 
 def case_path(cases_dir: str | Path, job: tuple) -> Path:
@@ -444,9 +451,10 @@ def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: in
     out += [(r, "library", e, s, st) for r in robots for e in LIBRARY for s in range(seeds)]
     out += [(r, "near", e, 1000 + s, st) for r in robots for e in LIBRARY for s in range(near_seeds)]
     out += [(r, "multi", None, 2000 + s, st) for r in robots for s in range(multi_seeds)]
+    out += [(r, "pair", None, 3000 + s, st) for r in robots for s in range(multi_seeds)]
     out += [(r, "reference", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(2)]
     out += [(r, "outside", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
-    group = {"clean_kinematic": "clean", "reference": "outside"}
+    group = {"clean_kinematic": "clean", "reference": "outside", "pair": "multi"}
     return [(*j, calibrator) for j in out if group.get(j[1], j[1]) in cases]
 
 
@@ -570,6 +578,17 @@ def summarize(rows: list[dict]) -> list[dict]:
                         "verdicts": _count(r["verdict"] for r in multi),
                         "offsets_rms_deg_before": float(np.mean([r["offsets_rms_deg"]["before"] for r in multi])),
                         "offsets_rms_deg_after": float(np.mean([_recommended(r) for r in multi])),
+                        "floor_offsets_rms_deg": floor})
+        pair = [r for r in rr if r["kind"] == "pair"]
+        if pair:
+            out.append({"robot": robot, "case": f"pair: {' + '.join(PAIR)} at realistic sizes", "seeds": len(pair),
+                        "detected": sum(r["verdict"] != "explained" for r in pair),
+                        "named": sum(sorted(r["selected"]) == sorted(PAIR) for r in pair),
+                        "effects_selected_right": sum(len(set(r["selected"]) & set(PAIR)) for r in pair),
+                        "wrong_confident": sum(bool(set(r["selected"]) - set(PAIR)) for r in pair),
+                        "verdicts": _count(r["verdict"] for r in pair),
+                        "offsets_rms_deg_before": float(np.mean([r["offsets_rms_deg"]["before"] for r in pair])),
+                        "offsets_rms_deg_after": float(np.mean([_recommended(r) for r in pair])),
                         "floor_offsets_rms_deg": floor})
         refs = {(r["name"], r["side"]): r["localization"] for r in rr if r["kind"] == "reference"}
         for o in OUTSIDE:
@@ -700,7 +719,7 @@ def pick_at_8e37d19(r: dict) -> str | None:
     return min((c for c in ok if c["cv_chi2"] - low < AMBIGUOUS_BIC), key=lambda c: (c["k"], c["cv_chi2"]))["name"]
 
 
-HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "outside")
+HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "pair", "outside")
 
 
 def heldout_recommendation(rows: list[dict]) -> dict | None:
@@ -869,6 +888,12 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         elif s["case"].startswith("multi"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']}/{s['seeds']} | "
                      f"{s['effects_selected_right']}/{s['effects_injected']} injected effects selected | "
+                     f"{s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | {s['offsets_rms_deg_after']:.4f} | "
+                     f"{_cell(s['floor_offsets_rms_deg'], 4)} | "
+                     f"{_cell(s['offsets_rms_deg_after'] / s['floor_offsets_rms_deg'], 2)} | {v} |")
+        elif s["case"].startswith("pair"):
+            L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']}/{s['seeds']} | "
+                     f"{s['named']}/{s['seeds']} both named ({s['effects_selected_right']}/{2 * s['seeds']} selected) | "
                      f"{s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | {s['offsets_rms_deg_after']:.4f} | "
                      f"{_cell(s['floor_offsets_rms_deg'], 4)} | "
                      f"{_cell(s['offsets_rms_deg_after'] / s['floor_offsets_rms_deg'], 2)} | {v} |")

@@ -291,7 +291,8 @@ def add_commands(sub) -> None:
                          "near-threshold, multi-effect and outside cases --seeds each)")
     bn.add_argument("--cases", nargs="+", default=None,
                     help="modelgap suite: only these case groups, of clean (with the kinematic floor), library, near, "
-                         "multi, outside (with its reference runs); default all (e.g. --cases clean library "
+                         "multi (with the pair of a link length and an IMU tilt at realistic sizes), outside (with its "
+                         "reference runs); default all (e.g. --cases clean library "
                          "--effect-seeds 20: the library effects with more seeds, beside their floor)")
     bn.add_argument("--outside-robots", nargs="+", default=None,
                     help="modelgap suite: the robots (of --robots) the edits outside the library run on (default "

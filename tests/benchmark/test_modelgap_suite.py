@@ -35,7 +35,7 @@ def test_every_case_records_the_stances_asked_and_each_kind_its_seeds():
     assert {j[4] for j in todo} == {("I", "II", "III", "IV", "tall")}
     kinds = [j[1] for j in todo]
     assert kinds.count("library") == 20 * len(LIBRARY) and kinds.count("clean") == 4
-    assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1
+    assert kinds.count("near") == 2 * len(LIBRARY) and kinds.count("multi") == 1 and kinds.count("pair") == 1
     assert kinds.count("outside") == 3 * len(OUTSIDE) and kinds.count("reference") == 2 * len(OUTSIDE)
     assert {j[4] for j in jobs(["a3"], 1, 1, [], 0)} == {None}
 
@@ -44,6 +44,7 @@ def test_cases_run_only_the_groups_asked_each_with_its_companions():
     todo = jobs(["a3"], 20, 4, ["a3"], 3, 2, 1, cases=("clean", "library"))
     kinds = [j[1] for j in todo]
     assert set(kinds) == {"clean", "clean_kinematic", "library"} and kinds.count("library") == 20 * len(LIBRARY)
+    assert {j[1] for j in jobs(["a3"], 1, 1, [], 0, multi_seeds=2, cases=("multi",))} == {"multi", "pair"}
     assert {j[1] for j in jobs(["a3"], 1, 1, ["a3"], 1, cases=("outside",))} == {"outside", "reference"}
     with pytest.raises(ConfigError, match="--cases: librari unknown.*clean, library, near, multi, outside"):
         jobs(["a3"], 1, 1, [], 0, cases=("librari",))
@@ -321,3 +322,13 @@ def test_the_recommendation_is_scored_on_held_out_foot_height_beside_the_rule_of
     assert (lib["cases"], lib["worse"], lib["worse_at_8e37d19"], lib["improves"]) == (2, 1, 2, 0)
     assert [w["seed"] for w in r["worse"]] == [1]
     assert "worse than the offsets only's beyond the allowance" in "\n".join(mg.heldout_markdown(held))
+
+
+def test_the_pair_case_is_two_library_effects_at_their_size_named_only_when_both_are():
+    from legcal_bench.benchmark.modelgap import PAIR
+    assert set(PAIR) <= set(LIBRARY) and len(PAIR) == 2
+    rows = [_row("pair", "+".join(PAIR), list(PAIR)), _row("pair", "+".join(PAIR), [PAIR[0]], seed=1),
+            _row("pair", "+".join(PAIR), [PAIR[1], "compliance"], seed=2)]
+    (s,) = summarize(rows)
+    assert (s["seeds"], s["named"], s["effects_selected_right"], s["wrong_confident"]) == (3, 1, 4, 1)
+    assert "1/3 both named (4/6 selected)" in markdown({"summary": [s]}, "m", "c")
