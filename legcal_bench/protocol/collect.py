@@ -460,7 +460,7 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
                 pelvis_pose_world=tr["pelvis_pose_world"], posture=tr["posture"],
                 posture_reachable=tr["posture_reachable"], imu_true_acc=tr["imu_true_acc"],
                 imu_true_gyro=tr["imu_true_gyro"],
-                q_enc_clean=clean_encoders(sim, tr["q_motor"]),
+                q_enc_clean=clean_encoders(sim, tr["q_motor"], tr["time"]),
                 meta={"session": session, "mode": cfg.mode, "sim_robot": sim.sim_legmap.name, "seed": seed,
                       "knee_straight_error_rad": cfg.knee_straight_error_rad if kind == "standing" else None,
                       "knee_straight_rad": sim.sim_legmap.knee_straight_rad, "offsets_spec": str(cfg.offsets),
@@ -500,10 +500,10 @@ def _collect(cfg: CollectConfig, out_dir: Path, progress: bool, legmap, reality)
     return summary
 
 
-def clean_encoders(sim: DoubleSupportSim, q_motor: np.ndarray) -> np.ndarray:
-    """The encoders' noise-free readings (their scale error included) as the joints' angles."""
-    e = sim.encoder_input(q_motor) / (1.0 + np.asarray(sim.sensor.encoder_scale or 0.0))
-    return to_joint_space(e, sim.encoder_map)
+def clean_encoders(sim: DoubleSupportSim, q_motor: np.ndarray, time: np.ndarray | None = None) -> np.ndarray:
+    """The encoders' noise-free readings (their scale error and reading laws included,
+    `SimSensors.clean_readings`; `time` the series' timestamps) as the joints' angles."""
+    return to_joint_space(sim.sensor.clean_readings(sim.encoder_input(q_motor), time), sim.encoder_map)
 
 
 def format_summary(s: CollectSummary) -> str:

@@ -488,7 +488,7 @@ class DoubleSupportSim:
         enc = slice(6, 6 + self.legmap.n_joints)  # after the IMU's 3 + 3
         noise = rng.standard_normal((n, enc.stop + (12 if self.has_ft else 0)))
         imu = sen.imu_samples(np.stack([buf["imu_true_acc"], buf["imu_true_gyro"]], axis=1), noise[:, :6])
-        obs = {"q_enc": sen.encoders(self.encoder_input(buf["q_motor"]), rng, noise[:, enc]),
+        obs = {"q_enc": sen.encoders(self.encoder_input(buf["q_motor"]), rng, noise[:, enc], buf["time"]),
                "imu_acc": np.ascontiguousarray(imu[:, 0]), "imu_gyro": np.ascontiguousarray(imu[:, 1])}
         if self.has_ft:
             obs["ft"] = sen.force_torque(buf["ft"], rng, noise[:, enc.stop:].reshape(n, 2, 6))

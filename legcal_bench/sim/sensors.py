@@ -196,14 +196,34 @@ class SimSensors:
     # Realized encoder scale errors (one per leg joint, leg-map order; empty = none): an encoder reads
     # (q - offset) / (1 + scale), so q = q_enc + scale q_enc + offset (issue #16's effect).
     encoder_scale: tuple[float, ...] = ()
+    # Reading laws (effect plug-ins that change how an encoder reads, through
+    # `ModelEdit.sensors`; e.g. a backlash): each `law(e, time) -> e` maps a whole series'
+    # noise-free readings e (N, n) (encoder space, after the scale error) at its
+    # timestamps `time` (N,) to what the encoders read before their noise. The ground
+    # truth's clean readings (`Truth.q_enc_clean`) go through them too.
+    reading_laws: tuple = ()
+
+    def clean_readings(self, q_true_minus_offset: np.ndarray, time: np.ndarray | None = None) -> np.ndarray:
+        """The encoders' noise-free readings of a series: the scale error, then the
+        reading laws (which need the series' `time`)."""
+        e = q_true_minus_offset
+        if self.encoder_scale:
+            e = e / (1.0 + np.asarray(self.encoder_scale))
+        if self.reading_laws and time is None:
+            raise SensorModelError("an effect that changes the encoders' reading law (a reading law of "
+                                   "`SimSensors.reading_laws`) needs a whole series with its timestamps: it is "
+                                   "simulated in static collection (`legcal-bench collect`), not frame by frame")
+        for law in self.reading_laws:
+            e = np.asarray(law(np.asarray(e, dtype=float), np.asarray(time, dtype=float)), dtype=float)
+        return e
 
     def encoders(self, q_true_minus_offset: np.ndarray, rng: np.random.Generator,
-                 noise: np.ndarray | None = None) -> np.ndarray:
+                 noise: np.ndarray | None = None, time: np.ndarray | None = None) -> np.ndarray:
         """Encoder readings; `noise`: standard normal draws to use instead of drawing
-        from `rng` (the same numbers give the same readings, whatever the batch)."""
+        from `rng` (the same numbers give the same readings, whatever the batch); `time`:
+        the series' timestamps, for the reading laws (`clean_readings`)."""
         m = self.model
-        if self.encoder_scale:
-            q_true_minus_offset = q_true_minus_offset / (1.0 + np.asarray(self.encoder_scale))
+        q_true_minus_offset = self.clean_readings(q_true_minus_offset, time)
         if noise is None:
             noise = rng.standard_normal(q_true_minus_offset.shape)
         q = q_true_minus_offset + m.encoder_noise_std * noise

@@ -39,3 +39,28 @@ def test_many_samples_read_at_once_are_the_samples_read_one_at_a_time(name):
     assert np.array_equal(imu, np.array([[acc, gyr] for (acc, gyr), _ in one]))
     assert np.array_equal(s.encoders(q, None, noise[:, 6:]), np.array([e for _, e in one]))
     assert a.random() == b.random()  # the same stream, left in the same place
+
+
+def test_a_reading_law_changes_the_readings_and_the_clean_ones_alike():
+    """Issue #61: an effect that changes how the encoders read (a reading law) reaches the
+    noisy readings and the truth's clean ones the same way; without the series' timestamps
+    it refuses instead of reading around the law."""
+    import dataclasses
+
+    from legcal_bench.errors import SensorModelError
+    def late(e, time):  # reads the angle half a second late
+        return np.stack([np.interp(time - 0.5, time, col) for col in e.T], axis=1)
+
+    base = SENSOR_PRESETS["realistic"]
+    law = dataclasses.replace(base, encoder_scale=(0.01, 0.0), reading_laws=(late,))
+    time = np.arange(100) * 0.02
+    e = np.stack([np.sin(time), np.cos(time)], axis=1)
+    clean = law.clean_readings(e, time)
+    assert np.allclose(clean, late(e / [1.01, 1.0], time))
+    noise = np.random.default_rng(0).standard_normal(e.shape)
+    rng = np.random.default_rng(1)
+    m = base.model
+    assert np.abs(law.encoders(e, rng, noise, time) - (clean + m.encoder_noise_std * noise)).max() <= m.encoder_resolution
+    with pytest.raises(SensorModelError, match="timestamps"):
+        law.encoders(e, rng, noise)
+    assert np.array_equal(base.clean_readings(e), e)  # no law, no scale: the angle as it is
