@@ -26,7 +26,10 @@ top of the current model (`fit_model`, confounded parameters held); it is kept o
   3. it moves some offset by more than MOVE_SIGMAS of that offset's noise-only
      standard deviation (otherwise it does not matter for the calibration).
 Two candidates passing within AMBIGUOUS_BIC of each other are reported as ambiguous
-(with the data that would separate them), never picked by a hair. A detected residual
+(with the data that would separate them), never picked by a hair. Where the greedy path
+ends with a residual left, every pair of candidates is fitted from the offsets alone
+(`_pair_search`: the same tests, and it must explain the data): a pair whose members do
+not lead the greedy path (a link length with an IMU tilt) takes its place. A detected residual
 that no candidate explains is "unexplained", with tracing's localization instead; so is
 a selection that leaves a significant residual a generic leg or IMU error still explains
 (a poor fit, `_structured`).
@@ -661,11 +664,21 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
         cv_current = best["cv_chi2"]
         if current.p_value >= ALPHA / 2:
             break
+    # The greedy path is nested: an effect that fits best alone can lead it away from a
+    # pair that explains the data together (a link length with an IMU tilt, issue #61).
+    # Where the path ends with a residual left, every pair of candidates is fitted from
+    # the offsets-only model and one that explains the data takes the path's place.
+    if significant and not ambiguous and MAX_EFFECTS >= 2 and _fires(_after_test(current, cv_current, cv_dof)):
+        pair = _pair_search(ctx, base, cv_base, fitted, tried, selected, held_by, ln_n, n_q, sigma0, say)
+        if pair is not None:
+            steps.append({"on_top_of": [], "pairs": True, "cv_chi2_current": cv_base,
+                          "candidates": [{k: v for k, v in r.items() if k != "ev"} for r in pair["rows"]]})
+            if pair["ambiguous"]:
+                ambiguous = pair["ambiguous"]
+            elif pair["best"] is not None:
+                selected, current, cv_current = list(pair["best"]["effects"]), pair["best"]["ev"], pair["best"]["cv_chi2"]
     final = current  # the selected model at its optimum over every segment, frames kept
-    after = {"chi2": final.chi2, "dof": final.dof, "chi2_per_dof": final.chi2 / final.dof,
-             "z": (final.chi2 - final.dof) / np.sqrt(2 * final.dof), "p_value": final.p_value}
-    if cv_current is not None:
-        after["cross_validation"] = _gap(cv_current, cv_dof, final)
+    after = _after_test(final, cv_current, cv_dof)
     residual_left = _fires(after)
     excess = max(base.chi2 - base.dof, 1e-12)
     after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess
@@ -774,6 +787,65 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     report["summary"] = summary_line(report)
     report["verdict_line"] = verdict_line(report)
     return report
+
+
+def _after_test(ev: Evaluated, cv: float | None, cv_dof: int) -> dict:
+    """The detection test on a model `ev` (its left-out stances' chi2 `cv`, on `cv_dof`)."""
+    out = {"chi2": ev.chi2, "dof": ev.dof, "chi2_per_dof": ev.chi2 / ev.dof,
+           "z": (ev.chi2 - ev.dof) / np.sqrt(2 * ev.dof), "p_value": ev.p_value}
+    if cv is not None:
+        out["cross_validation"] = _gap(cv, cv_dof, ev)
+    return out
+
+
+def _pair_search(ctx: Context, base: Evaluated, cv_base, fitted: list, tried, path, held_by: dict, ln_n: float,
+                 n_q: int, sigma0: np.ndarray, say) -> dict | None:
+    """Every pair of the candidates `tried` (but the greedy `path`'s own), each fitted
+    from the offsets-only model `base`, scored as a selection step is: its drop beats
+    the BIC penalty, it moves an offset, it is admissible, its left-out stances' chi2
+    beats the offsets only's, and it explains the data (p >= ALPHA / 2). The best by BIC
+    ("best", None if no pair passes) or, within AMBIGUOUS_BIC of it, the pairs as
+    ambiguous; each pair's row in "rows"; the fits join `fitted`. None without
+    cross-validation."""
+    if cv_base is None:
+        return None
+    single = {label: ev for label, ev, _ in fitted if " + " not in label}
+    known = {frozenset(label.split(" + ")): (ev, bad) for label, ev, bad in fitted}  # the greedy path's own fits
+    rows = []
+    for i, a in enumerate(tried):
+        for b in tried[i + 1:]:
+            if {a, b} == set(path) or a not in single:
+                continue
+            if frozenset((a, b)) in known:
+                ev, bad = known[frozenset((a, b))]
+            else:
+                say(f"fit {a} + {b} (pair)")
+                try:
+                    ev = nested(ctx, single[a], b, held_by)
+                except NestedFitError:
+                    continue
+                bad = inadmissible(ctx, ev, [a, b])
+                fitted.append((f"{a} + {b}", ev, bad))
+            k, d = ev.k - base.k, base.chi2 - ev.chi2
+            move = np.abs(ev.fit.x[:n_q] - base.fit.x[:n_q]) / sigma0
+            r = {"effect": f"{a} + {b}", "effects": [a, b], "ev": ev, "delta_chi2": d, "k": k,
+                 "bic_penalty": k * ln_n, "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
+                 "max_offset_move_sigmas": float(move.max()), "moves_offsets": bool(move.max() > MOVE_SIGMAS),
+                 "admissible": not bad, "inadmissible": bad, "explains": bool(ev.p_value >= ALPHA / 2),
+                 "cv_chi2": None}
+            if r["passes_bic"] and r["moves_offsets"] and r["admissible"] and r["explains"]:
+                say(f"cross-validation {a} + {b} (pair)")
+                r["cv_chi2"] = _cv(ev)[0]
+            r["passes_cv"] = r["cv_chi2"] is not None and bool(r["cv_chi2"] < cv_base)
+            rows.append(r)
+    ok = sorted([r for r in rows if r["passes_cv"]], key=lambda r: r["bic"])
+    out = {"rows": rows, "best": ok[0] if ok else None, "ambiguous": []}
+    if len(ok) > 1 and ok[1]["bic"] - ok[0]["bic"] < AMBIGUOUS_BIC:
+        out["ambiguous"] = [{"effect": " + ".join(r["effects"]), "bic_minus_best": r["bic"] - ok[0]["bic"],
+                             "remedy": "; ".join(load_effects([e])[0].remedy for e in r["effects"])}
+                            for r in ok if r["bic"] - ok[0]["bic"] < AMBIGUOUS_BIC]
+        out["best"] = None
+    return out
 
 
 def _candidates(ctx: Context, base: Evaluated, cv_base, fitted, set_aside: dict, selected, names) -> list[dict]:

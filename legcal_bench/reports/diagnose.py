@@ -211,7 +211,9 @@ def markdown(report: dict, made_by: str, code: str, truth: dict | None, walks: d
         L.append(f"- {n}")
     L += ["", "## Selection steps", ""]
     for st in report["steps"]:
-        L += [f"On top of {st['on_top_of'] or 'the offsets'}:", "",
+        head = ("Pairs, each on top of the offsets (the greedy path left a residual; a pair passes only if it also "
+                "explains the data):" if st.get("pairs") else f"On top of {st['on_top_of'] or 'the offsets'}:")
+        L += [head, "",
               "| effect | delta chi2 | BIC penalty | CV agrees | max offset move (sigma) | admissible |",
               "|---|---|---|---|---|---|"]
         for c in st["candidates"]:
