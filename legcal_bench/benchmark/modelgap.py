@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from legcal_bench.errors import ConfigError
+from legcal_bench.errors import ConfigError, LegcalError
 from legcal_bench.evaluation.modelgap import ALPHA
 from legcal_bench.files.scratch import scratch_dir
 
@@ -430,7 +430,12 @@ def run_job(job: tuple, cases_dir: str, provenance: dict, collect: dict | None =
 
     single_thread()
     t0 = time.perf_counter()
-    row = run_case(*job, collect=collect)
+    try:
+        row = run_case(*job, collect=collect)
+    except LegcalError as e:  # a case the robot cannot do (a stance out of its reach): the run says which one
+        robot, kind, name, seed = job[:4]
+        raise type(e)(f"the model-gap case {kind}{f' {name}' if name else ''} seed {seed} on "
+                          f"{robot}: {e}") from e
     path = case_path(cases_dir, job)
     atomic_write_json(path, {"key": provenance["key"], "case": case_identity(job, collect),
                              "provenance": {"code": provenance["code"], "command": provenance["command"]},
