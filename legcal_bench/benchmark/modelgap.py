@@ -17,6 +17,10 @@ Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagno
   pair          two library effects at once, each at a realistic size (`PAIR`: a link
                 length with an IMU tilt), run with the multi cases (`--cases multi`):
                 named when both are selected and nothing else;
+  plugin        an effect spec of the user's (`bench --plugin-effects`: a plug-in's
+                physics, e.g. docs/examples/backlash_plugin's), run beside the groups
+                asked, `--effect-seeds` each: named when its effect alone is selected
+                (with the clean cases, where it must not be);
   outside       geometric edits no library effect describes (`OUTSIDE`: a mounting point,
                 axis offsets, axis directions; sizes per robot, `OUTSIDE_SIZE`), on every
                 robot run unless `outside_robots` (`bench --outside-robots`) names some:
@@ -54,6 +58,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import time
 from pathlib import Path
 
@@ -228,6 +233,8 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     elif kind == "multi":
         specs = multi_specs(seed)
         name = "+".join(multi_effects(seed))
+    elif kind == "plugin":
+        specs = (name,)
     elif kind == "pair":
         specs = tuple(library_spec(e, seed) for e in PAIR)
         name = "+".join(PAIR)
@@ -352,7 +359,7 @@ def _chi2_at_truth(ctx, truth) -> dict:
 CASES_DIR = Path("runs/bench/modelgap")  # `run`'s cases folder unless given (relative: the working directory)
 # Submission order (`run`): the long cases first, so that no worker is left with one at the
 # end (seconds a case, A3-like at commit 8ea50e6: a library effect ~60, clean ~15).
-COST = {"clean_kinematic": 1, "clean": 1, "reference": 1, "library": 4, "near": 4, "multi": 4, "pair": 4, "outside": 4}
+COST = {"clean_kinematic": 1, "clean": 1, "reference": 1, "library": 4, "near": 4, "multi": 4, "pair": 4, "plugin": 4, "outside": 4}
 
 
 def case_path(cases_dir: str | Path, job: tuple) -> Path:
@@ -361,7 +368,7 @@ def case_path(cases_dir: str | Path, job: tuple) -> Path:
     from legcal_bench.robots import robot_label
 
     robot, kind, name, seed, stances, calibrator = job
-    group = kind + (f"_{name}" if name else "")
+    group = kind + (f"_{re.sub(r'[^A-Za-z0-9_.=+-]+', '_', name)}" if name else "")  # a spec's ':' and ',' as '_'
     if stances:
         group += "_st-" + "-".join(stances)
     if tuple(calibrator) != DEFAULT_CALIBRATOR:
@@ -444,8 +451,10 @@ def run_job(job: tuple, cases_dir: str, provenance: dict, collect: dict | None =
 
 
 def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: int, near_seeds: int = 0,
-         multi_seeds: int = 0, stances=None, cases=CASES, calibrator: tuple = DEFAULT_CALIBRATOR) -> list[tuple]:
-    """(robot, kind, name, seed, stances, calibrator) of every case of the groups in `cases`."""
+         multi_seeds: int = 0, stances=None, cases=CASES, calibrator: tuple = DEFAULT_CALIBRATOR,
+         plugins=()) -> list[tuple]:
+    """(robot, kind, name, seed, stances, calibrator) of every case of the groups in `cases`,
+    and `seeds` of each effect spec in `plugins`."""
     unknown = sorted(set(cases) - set(CASES))
     if unknown:
         raise ConfigError(f"--cases: {', '.join(unknown)} unknown; the model-gap suite's cases are "
@@ -460,14 +469,16 @@ def jobs(robots, seeds: int, clean_seeds: int, outside_robots, outside_seeds: in
     out += [(r, "reference", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(2)]
     out += [(r, "outside", o, s, st) for r in outside_robots for o in OUTSIDE for s in range(outside_seeds)]
     group = {"clean_kinematic": "clean", "reference": "outside", "pair": "multi"}
-    return [(*j, calibrator) for j in out if group.get(j[1], j[1]) in cases]
+    out = [j for j in out if group.get(j[1], j[1]) in cases]
+    out += [(r, "plugin", spec, s, st) for r in robots for spec in plugins for s in range(seeds)]
+    return [(*j, calibrator) for j in out]
 
 
 def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_ROBOTS, outside_seeds: int = 10,
         near_seeds: int = 10, multi_seeds: int = 10, workers: int = 2, progress: bool = True,
         stances=None, cases=CASES, calibrator: tuple = DEFAULT_CALIBRATOR, out: str | Path | None = None,
-        command: str | None = None) -> dict:
-    """Every case (`jobs`) of the groups in `cases` diagnosed; `seeds` per library
+        command: str | None = None, plugins=()) -> dict:
+    """Every case (`jobs`) of the groups in `cases` and of the effect specs `plugins` diagnosed; `seeds` per library
     effect, the other counts as named; `stances` recorded in every case (default: the
     paper's four); `calibrator` (name, options as key-value pairs) makes the offsets each
     diagnosis starts from; the outside edits run on `outside_robots` of `robots` (None:
@@ -481,13 +492,13 @@ def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_R
 
     outside_robots = list(robots) if outside_robots is None else [r for r in outside_robots if r in robots]
     todo = jobs(robots, seeds, clean_seeds, outside_robots, outside_seeds, near_seeds, multi_seeds, stances, cases,
-                calibrator)
+                calibrator, plugins)
     cases_dir = Path(CASES_DIR if out is None else out).resolve()
     if command is None:
         command = (f"legcal_bench.benchmark.modelgap.run(robots={list(robots)}, seeds={seeds}, "
                    f"clean_seeds={clean_seeds}, outside_robots={list(outside_robots)}, outside_seeds={outside_seeds}, "
                    f"near_seeds={near_seeds}, multi_seeds={multi_seeds}, stances={stances and list(stances)}, "
-                   f"cases={list(cases)}, calibrator={calibrator})")
+                   f"cases={list(cases)}, calibrator={calibrator}, plugins={list(plugins)})")
     code = code_version()  # read once: every case of a run records the code the run started with
     code_id = code_identity(code)
     paths = [case_path(cases_dir, j) for j in todo]
@@ -595,6 +606,19 @@ def summarize(rows: list[dict]) -> list[dict]:
                         "offsets_rms_deg_before": float(np.mean([r["offsets_rms_deg"]["before"] for r in pair])),
                         "offsets_rms_deg_after": float(np.mean([_recommended(r) for r in pair])),
                         "floor_offsets_rms_deg": floor})
+        for spec in dict.fromkeys(r["name"] for r in rr if r["kind"] == "plugin"):
+            rs = [r for r in rr if r["kind"] == "plugin" and r["name"] == spec]
+            e = spec.split(":")[0]
+            out.append({"robot": robot, "case": f"plugin: {spec}", "seeds": len(rs),
+                        "detected": sum(r["verdict"] != "explained" for r in rs),
+                        "correct": sum(r["selected"] == [e] for r in rs),
+                        "wrong_confident": sum(bool(r["selected"]) and r["selected"] != [e] for r in rs),
+                        "verdicts": _count(r["verdict"] for r in rs),
+                        "offsets_rms_deg_before": float(np.mean([r["offsets_rms_deg"]["before"] for r in rs])),
+                        "offsets_rms_deg_after": float(np.mean([_recommended(r) for r in rs])),
+                        "floor_offsets_rms_deg": floor,
+                        "after_over_floor": float(np.mean([_recommended(r) for r in rs])) / floor
+                        if floor == floor else None})
         refs = {(r["name"], r["side"]): r["localization"] for r in rr if r["kind"] == "reference"}
         for o in OUTSIDE:
             rs = [r for r in rr if r["kind"] == "outside" and r["name"] == o]
@@ -724,7 +748,7 @@ def pick_at_8e37d19(r: dict) -> str | None:
     return min((c for c in ok if c["cv_chi2"] - low < AMBIGUOUS_BIC), key=lambda c: (c["k"], c["cv_chi2"]))["name"]
 
 
-HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "pair", "outside")
+HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "pair", "plugin", "outside")
 
 
 def heldout_recommendation(rows: list[dict]) -> dict | None:

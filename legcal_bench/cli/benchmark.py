@@ -52,7 +52,7 @@ def cmd_bench(a: argparse.Namespace) -> int:
 
     suite = get_suite(a.suite)
     for opt, val, hint in (("--effect-seeds", a.effect_seeds, "; use --seeds"), ("--cases", a.cases, ""),
-                           ("--outside-robots", a.outside_robots, "")):
+                           ("--outside-robots", a.outside_robots, ""), ("--plugin-effects", a.plugin_effects, "")):
         if "modelgap" not in suite.tags and val:
             raise ConfigError(f"{opt}: the modelgap suite's option, not {a.suite!r}'s{hint}")
     if "closed_loop" in suite.tags:
@@ -242,6 +242,12 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
         calibrator = (a.calibrators[0], ())
     if a.stances:
         check_stance_names(a.stances)
+    plugins = tuple(a.plugin_effects or ())
+    if plugins:
+        from legcal_bench.sim.effects import parse_effect
+
+        for spec in plugins:
+            parse_effect(spec)  # a misspelt or uninstalled effect fails before any case runs
     if a.outside_robots:
         stray = [r for r in a.outside_robots if r not in robots]
         if stray:
@@ -252,13 +258,14 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
                + (f" --stances {' '.join(a.stances)}" if a.stances else "")
                + (f" --cases {' '.join(a.cases)}" if a.cases else "")
                + (f" --outside-robots {' '.join(a.outside_robots)}" if a.outside_robots else "")
-               + (f" --calibrators {calibrator[0]}" if a.calibrators else ""))
+               + (f" --calibrators {calibrator[0]}" if a.calibrators else "")
+               + (f" --plugin-effects {' '.join(plugins)}" if plugins else ""))
     code = code_version()
     t0 = time.perf_counter()
     data = run(robots, seeds=effect_seeds, clean_seeds=2 * seeds, outside_seeds=seeds, near_seeds=seeds,
                multi_seeds=seeds, workers=a.workers, progress=not a.quiet, stances=a.stances,
                cases=tuple(a.cases or CASES), outside_robots=tuple(a.outside_robots) if a.outside_robots else None,
-               calibrator=calibrator, out=Path(a.out) / RESULTS_NAME / "cases", command=made_by)
+               calibrator=calibrator, out=Path(a.out) / RESULTS_NAME / "cases", command=made_by, plugins=plugins)
     data.update(made_by=made_by, code=code, wall_s=time.perf_counter() - t0)
     md = markdown(data, made_by, describe(code))
     write_report(Path(a.out) / RESULTS_NAME, md, data, name=RESULTS_NAME)
@@ -294,6 +301,10 @@ def add_commands(sub) -> None:
                          "multi (with the pair of a link length and an IMU tilt at realistic sizes), outside (with its "
                          "reference runs); default all (e.g. --cases clean library "
                          "--effect-seeds 20: the library effects with more seeds, beside their floor)")
+    bn.add_argument("--plugin-effects", nargs="+", default=None, metavar="SPEC",
+                    help="modelgap suite: also run these effect specs (an installed plug-in's physics, as in collect "
+                         "--effect; e.g. backlash:joint=left_knee,deg=0.2 with docs/examples/backlash_plugin), "
+                         "--effect-seeds each; named when that effect alone is selected (default: none)")
     bn.add_argument("--outside-robots", nargs="+", default=None,
                     help="modelgap suite: the robots (of --robots) the edits outside the library run on (default "
                          "every robot run; 5 edits x --seeds each, ~15-60 s a diagnosis)")

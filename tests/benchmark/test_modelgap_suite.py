@@ -347,3 +347,15 @@ def test_a_case_the_robot_cannot_do_is_named_in_the_error(monkeypatch, tmp_path)
     with pytest.raises(IKError, match=r"^the model-gap case library leg_length seed 3 on a3: stance standing"):
         mg.run_job(job, str(tmp_path), {"key": "k", "code": "c", "command": "m"})
     assert not any(tmp_path.rglob("*.json"))  # nothing half-written
+
+
+def test_a_plugin_spec_runs_its_seeds_beside_the_groups_asked_and_is_named_when_alone_selected():
+    spec = "backlash:joint=left_knee,deg=0.2"
+    todo = jobs(["a3"], 3, 2, [], 0, cases=("clean",), plugins=(spec,))
+    assert [j[1] for j in todo].count("plugin") == 3 and {j[2] for j in todo if j[1] == "plugin"} == {spec}
+    assert mg.case_path("c", todo[-1]).parent.name == "plugin_backlash_joint=left_knee_deg=0.2"
+    rows = [_row("clean", None, [], "explained", at_truth={"training": 1.0}),
+            _row("plugin", spec, ["backlash"]), _row("plugin", spec, ["backlash", "imu_tilt"], seed=1),
+            _row("plugin", spec, [], "unexplained", seed=2)]
+    s = next(s for s in summarize(rows) if s["case"] == f"plugin: {spec}")
+    assert (s["seeds"], s["correct"], s["wrong_confident"], s["detected"]) == (3, 1, 1, 3)

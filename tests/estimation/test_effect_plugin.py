@@ -8,11 +8,9 @@ The guide's code is the file's, and its commands run as written against the inst
 wheel (tests/docs/test_snippets.py, which checks each output line the guide quotes and
 then `check_walkthrough_outputs`), so neither can drift."""
 
-import importlib
 import json
 import re
 import shlex
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +19,7 @@ import pytest
 from legcal_bench.data.recording import list_segments, load_truth
 from legcal_bench.errors import ConfigError
 from legcal_bench.sim.effects import parse_effect
+from tests.estimation.plugin_install import install_example
 
 REPO = Path(__file__).resolve().parents[2]
 EXAMPLE = REPO / "docs" / "examples" / "effect_plugin"
@@ -30,19 +29,8 @@ INSTALL = ["pip", "install", "-e", "docs/examples/effect_plugin"]
 
 @pytest.fixture
 def sole_bend(tmp_path, monkeypatch):
-    """The example installed as `pip install -e` would: its module and a dist-info with its
-    entry point on a new import path (here and, through PYTHONPATH, in subprocesses)."""
-    site = tmp_path / "site"
-    info = site / "legcal_sole_bend-0.1.dist-info"
-    info.mkdir(parents=True)
-    (site / "legcal_sole_bend.py").write_text((EXAMPLE / "legcal_sole_bend.py").read_text())
-    entry = re.search(r'^sole_bend = "(.*)"$', (EXAMPLE / "pyproject.toml").read_text(), re.M).group(1)
-    (info / "METADATA").write_text("Metadata-Version: 2.1\nName: legcal_sole_bend\nVersion: 0.1\n")
-    (info / "entry_points.txt").write_text(f"[legcal_bench.effects]\nsole_bend = {entry}\n")
-    monkeypatch.syspath_prepend(str(site))
-    monkeypatch.setenv("PYTHONPATH", ":".join(filter(None, [str(site), __import__("os").environ.get("PYTHONPATH")])))
-    importlib.invalidate_caches()
-    sys.modules.pop("legcal_sole_bend", None)
+    """The example installed as `pip install -e` would (`plugin_install.install_example`)."""
+    install_example(EXAMPLE, "legcal_sole_bend", "sole_bend", tmp_path / "site", monkeypatch)
 
 
 def walkthrough() -> list[tuple[list[str], list[str]]]:
