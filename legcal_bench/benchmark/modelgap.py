@@ -34,6 +34,12 @@ Cases, each a session set (weld, `calibrated-imu`, the paper's injection) diagno
                 twisted about a line off its knee's normal turns the knee's zero,
                 which no data tell from an encoder's offset).
 
+A case the robot cannot do (an edit of a joint its legs lack; an effect with which it
+cannot stand in a stance, e.g. legs without ankle roll with a shank shorter than the
+other cannot stand straight-legged with both soles flat) is a row saying why
+("not_run"), listed in the report and counted in no statistic; a clean case it cannot
+do is an error.
+
 Each case's row records the verdict, every candidate estimate the diagnosis weighed
 (offsets only, each admissible fit, the generic geometric fit: its cross-validated
 chi-square and its offsets' error against the truth) and the one it recommends. The
@@ -211,19 +217,10 @@ def _collect(cfg, work: Path):
     return legmap, load_session(work / "set", robot=legmap), load_truth(list_segments(work / "set")[0])
 
 
-def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
-             calibrator: tuple = DEFAULT_CALIBRATOR, collect: dict | None = None) -> dict:
-    """One diagnosed session set; `kind` clean | library | near | multi | outside |
-    reference; `stances` recorded (default: the paper's four); `calibrator` (name,
-    options as key-value pairs) makes the offsets the diagnosis starts from; `collect`:
-    CollectConfig overrides (shorter sessions)."""
-    from legcal_bench.calibrators.base import calibrate_training
-    from legcal_bench.calibrators.registry import get_calibrator
-    from legcal_bench.estimation.problem.fit import fit_model
-    from legcal_bench.evaluation.metrics import rms
-    from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
-    from legcal_bench.evaluation.scoring import heldout_scores
-
+def case_effects(robot: str, kind: str, name: str | None, seed: int) -> tuple[tuple[str, ...], str | None,
+                                                                             float | None, str | None]:
+    """A case's effects: (specs, the edited side of an outside edit, the near band's
+    scale, the case's name: a multi or pair case's its effects joined by "+")."""
     specs, side, scale = (), None, None
     if kind == "library":
         specs = (library_spec(name, seed),)
@@ -241,6 +238,26 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
     elif kind in ("outside", "reference"):
         spec, side = outside_spec(name, seed, REFERENCE_SCALE if kind == "reference" else 1.0, robot)
         specs = (spec,)
+    return specs, side, scale, name
+
+
+def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
+             calibrator: tuple = DEFAULT_CALIBRATOR, collect: dict | None = None) -> dict:
+    """One diagnosed session set; `kind` clean | library | near | multi | outside |
+    reference; `stances` recorded (default: the paper's four); `calibrator` (name,
+    options as key-value pairs) makes the offsets the diagnosis starts from; `collect`:
+    CollectConfig overrides (shorter sessions)."""
+    from legcal_bench.calibrators.base import calibrate_training
+    from legcal_bench.calibrators.registry import get_calibrator
+    from legcal_bench.estimation.problem.fit import fit_model
+    from legcal_bench.evaluation.metrics import rms
+    from legcal_bench.evaluation.modelgap import context, diagnose, evaluate, trace
+    from legcal_bench.evaluation.scoring import heldout_scores
+
+    specs, side, scale, name = case_effects(robot, kind, name, seed)
+    lacking = _lacking_role(robot, specs) if kind in NOT_RUN_KINDS else None
+    if lacking:
+        raise NotApplicable(lacking)
     cal_name, cal_options = calibrator
     cal = get_calibrator(cal_name, **dict(cal_options))
     with scratch_dir("modelgap") as work:
@@ -316,6 +333,32 @@ def run_case(robot: str, kind: str, name: str | None, seed: int, stances=None,
                heldout_foot_height_mm=None if held is None else {"offsets_only": held["before"],
                                                                    "recommended": held["after"]})
     return row
+
+
+# A case of these kinds that the robot cannot do is a row of its own ("not_run": why),
+# counted and listed in the report, not an error ending the run: an edit of a joint the
+# robot lacks (the ankle's axes on legs without ankle roll), or an effect with which it
+# cannot stand in a stance (`IKError`: legs without ankle roll cannot stand straight-legged
+# with a shank shorter than the other, nor flat on a sole turned by a hip axis's tilt). A
+# clean case the robot cannot do is the protocol's failure on it: an error.
+NOT_RUN_KINDS = ("library", "near", "multi", "pair", "plugin", "outside", "reference")
+
+
+class NotApplicable(LegcalError):
+    """A case's effect does not apply to the robot (`NOT_RUN_KINDS`); the message says why."""
+
+
+def _lacking_role(robot: str, specs) -> str | None:
+    """Why `specs` (effect specs naming joints as side_role) cannot be made on `robot`: a
+    joint role its legs lack; None if every named joint is there."""
+    from legcal_bench.robots import load_robot
+
+    roles = set(load_robot(robot).joint_roles)
+    for spec in specs:
+        m = re.search(r"(?:^|[:,])joint=(?:left|right)_([a-z_]+?)(?:,|$)", spec)
+        if m and m.group(1) not in roles:
+            return f"{spec}: the robot's legs have no {m.group(1)} joint"
+    return None
 
 
 def _offset_equivalent(ctx, cfg, start, work: Path) -> np.ndarray:
@@ -435,14 +478,24 @@ def run_job(job: tuple, cases_dir: str, provenance: dict, collect: dict | None =
     from legcal_bench.files.parallel import single_thread
     from legcal_bench.files.atomic import atomic_write_json
 
+    from legcal_bench.errors import IKError
+
     single_thread()
     t0 = time.perf_counter()
+    robot, kind, name, seed = job[:4]
     try:
         row = run_case(*job, collect=collect)
-    except LegcalError as e:  # a case the robot cannot do (a stance out of its reach): the run says which one
-        robot, kind, name, seed = job[:4]
+    except (NotApplicable, IKError) as e:
+        if kind not in NOT_RUN_KINDS:
+            raise type(e)(f"the model-gap case {kind}{f' {name}' if name else ''} seed {seed} on {robot}: {e}") from e
+        from legcal_bench.robots import load_robot
+
+        specs, side, _, name = case_effects(robot, kind, name, seed)
+        row = {"robot": load_robot(robot).name, "robot_spec": robot, "kind": kind, "name": name,
+               "spec": " ".join(specs) or None, "seed": seed, "side": side, "not_run": str(e)}
+    except LegcalError as e:  # the run says which case
         raise type(e)(f"the model-gap case {kind}{f' {name}' if name else ''} seed {seed} on "
-                          f"{robot}: {e}") from e
+                      f"{robot}: {e}") from e
     path = case_path(cases_dir, job)
     atomic_write_json(path, {"key": provenance["key"], "case": case_identity(job, collect),
                              "provenance": {"code": provenance["code"], "command": provenance["command"]},
@@ -543,11 +596,20 @@ def _execute(tasks: list[tuple], workers: int, progress: bool) -> None:
         bar.close()
 
 
+def ran(rows: list[dict]) -> list[dict]:
+    """The rows of the cases that ran (not those the robot could not do: `NOT_RUN_KINDS`)."""
+    return [r for r in rows if not r.get("not_run")]
+
+
 def summarize(rows: list[dict]) -> list[dict]:
     out = []
     robots = list(dict.fromkeys(r["robot"] for r in rows))
     for robot in robots:
-        rr = [r for r in rows if r["robot"] == robot]
+        skipped = [r for r in rows if r["robot"] == robot and r.get("not_run")]
+        if skipped:
+            out.append({"robot": robot, "case": "not run", "seeds": len(skipped), "verdicts": {},
+                        "cases": [f"{r['kind']} {r['name']} seed {r['seed']}: {r['not_run']}" for r in skipped]})
+        rr = ran([r for r in rows if r["robot"] == robot])
         clean = [r for r in rr if r["kind"] == "clean"]
         floor = float(np.mean([_recommended(r) for r in clean])) if clean else float("nan")
         for case in ("clean", "clean_kinematic"):
@@ -659,6 +721,7 @@ def done_when(rows: list[dict]) -> dict:
     from legcal_bench.evaluation.modelgap import CONFOUNDED_OFFSETS, NOT_UNIQUE  # a summary's why, off the floor
 
     out: dict = {}
+    rows = ran(rows)
     tot = {"outside": 0, "selected": 0, "ambiguous": 0, "unexplained": 0, "explained": 0, "scored": 0, "within": 0}
     for robot in dict.fromkeys(r["robot"] for r in rows):
         rr = [r for r in rows if r["robot"] == robot]
@@ -902,8 +965,11 @@ def markdown(data: dict, made_by: str, code: str) -> str:
          "(`library_spec`); offsets: RMS error of the offsets (deg), offsets-only vs after the diagnosis.", "",
          "| robot | case | seeds | detected | correct / no effect claimed | wrong confident | offsets before | after "
          "| floor | after/floor | verdicts |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    not_run = [s for s in data["summary"] if s["case"] == "not run"]
     for s in data["summary"]:
         v = ", ".join(f"{k} {n}" for k, n in s["verdicts"].items())
+        if s["case"] == "not run":
+            continue
         if s["case"].startswith("clean"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['detected']} (training test {s['training_test_fired']}"
                      f", {_gap_fired(s)}) | {s['no_effect_claimed']}/{s['seeds']} | – | – | "
@@ -937,7 +1003,10 @@ def markdown(data: dict, made_by: str, code: str) -> str:
                      f"{s['correct']}/{s['seeds']} | {s['wrong_confident']} | {s['offsets_rms_deg_before']:.4f} | "
                      f"{s['offsets_rms_deg_after']:.4f} | {_cell(s['floor_offsets_rms_deg'], 4)} | "
                      f"{_cell(s['after_over_floor'], 2)} | {v} |")
-    rows = data.get("rows") or ()
+    for s in not_run:
+        L += ["", f"{s['robot']}: {s['seeds']} case(s) not run, the robot cannot do them (not counted above):", "",
+              *(f"- {c}" for c in s["cases"])]
+    rows = ran(list(data.get("rows") or ()))
     # Issue #41's statistics on rows the code since #41 made (they carry the diagnosis's
     # candidates): runs made before it keep their pages as they were.
     if any(r["kind"] in ("outside", "library") and "candidates" in r for r in rows):

@@ -334,17 +334,19 @@ def test_the_pair_case_is_two_library_effects_at_their_size_named_only_when_both
     assert "1/3 both named (4/6 selected)" in markdown({"summary": [s]}, "m", "c")
 
 
-def test_a_case_the_robot_cannot_do_is_named_in_the_error(monkeypatch, tmp_path):
+def test_a_case_that_fails_is_named_in_the_error(monkeypatch, tmp_path):
     # Issue #61's measurement: the five-joint robot's run ended on "stance standing ...
-    # out of this robot's reach" without saying which of its 90 cases.
-    from legcal_bench.errors import IKError
+    # out of this robot's reach" without saying which of its 90 cases. A case the robot
+    # cannot do is now a row of its own (tests/benchmark/test_modelgap_not_run.py); any
+    # other error still ends the run, naming the case.
+    from legcal_bench.errors import ConfigError
 
-    def unreachable(*a, **k):
-        raise IKError("stance standing (straight-leg standing): its nominal posture is out of this robot's reach")
+    def bad(*a, **k):
+        raise ConfigError("--effect 'x': unknown")
 
-    monkeypatch.setattr(mg, "run_case", unreachable)
+    monkeypatch.setattr(mg, "run_case", bad)
     job = ("a3", "library", "leg_length", 3, None, mg.DEFAULT_CALIBRATOR)
-    with pytest.raises(IKError, match=r"^the model-gap case library leg_length seed 3 on a3: stance standing"):
+    with pytest.raises(ConfigError, match=r"^the model-gap case library leg_length seed 3 on a3: --effect 'x'"):
         mg.run_job(job, str(tmp_path), {"key": "k", "code": "c", "command": "m"})
     assert not any(tmp_path.rglob("*.json"))  # nothing half-written
 
