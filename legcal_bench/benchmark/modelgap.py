@@ -542,14 +542,20 @@ def run(robots, seeds: int = 10, clean_seeds: int = 20, outside_robots=OUTSIDE_R
     provenance (default: this call's arguments). Returns {"rows", "summary", "cases":
     how many there are, were computed and were kept}."""
     from legcal_bench.provenance import code_version
+    from legcal_bench.robots.build import write_designs
 
-    outside_robots = list(robots) if outside_robots is None else [r for r in outside_robots if r in robots]
+    cases_dir = Path(CASES_DIR if out is None else out).resolve()
+    # A generated robot by name (`legcal_bench.robots.design.GENERATED_DESIGNS`, e.g.
+    # five_joint): its model written beside the cases (a case's key has its label, not the path).
+    given = list(robots)
+    robots = write_designs(given, cases_dir / "_robots")
+    outside_robots = (list(robots) if outside_robots is None
+                      else [robots[given.index(r)] for r in outside_robots if r in given])
     todo = jobs(robots, seeds, clean_seeds, outside_robots, outside_seeds, near_seeds, multi_seeds, stances, cases,
                 calibrator, plugins)
-    cases_dir = Path(CASES_DIR if out is None else out).resolve()
     if command is None:
-        command = (f"legcal_bench.benchmark.modelgap.run(robots={list(robots)}, seeds={seeds}, "
-                   f"clean_seeds={clean_seeds}, outside_robots={list(outside_robots)}, outside_seeds={outside_seeds}, "
+        command = (f"legcal_bench.benchmark.modelgap.run(robots={given}, seeds={seeds}, "
+                   f"clean_seeds={clean_seeds}, outside_robots={[given[robots.index(r)] for r in outside_robots]}, outside_seeds={outside_seeds}, "
                    f"near_seeds={near_seeds}, multi_seeds={multi_seeds}, stances={stances and list(stances)}, "
                    f"cases={list(cases)}, calibrator={calibrator}, plugins={list(plugins)})")
     code = code_version()  # read once: every case of a run records the code the run started with

@@ -167,8 +167,9 @@ def _collect_overrides(a: argparse.Namespace, **more) -> dict:
 
 def _robot_options(p: argparse.ArgumentParser, default) -> None:
     p.add_argument("--robots", "--robot", nargs="+", default=default,
-                   help="robots: built-in names or leg-map paths (default: "
-                        + (" ".join(default) if default else "the suite's") + ")")
+                   help="robots: built-in names or leg-map paths; --suite modelgap also takes a generated "
+                        "robot's name (legcal_bench.robots.design, e.g. five_joint), its model written under "
+                        "--out (default: " + (" ".join(default) if default else "the suite's") + ")")
     p.add_argument("--mjcf", default=None, help="with one robot: use this MJCF instead of the one its leg map names "
                                                 "(default: the leg map's)")
     p.add_argument("--stances", nargs="+", default=None,
@@ -222,9 +223,11 @@ def _bench_modelgap(a: argparse.Namespace, suite) -> int:
     from legcal_bench.protocol.stances import check_stance_names
     from legcal_bench.provenance import code_version, describe
 
+    from legcal_bench.robots.design import GENERATED_DESIGNS
+
     robots = []
     for r in a.robots or suite.robots:
-        missing = available(r)
+        missing = None if r in GENERATED_DESIGNS else available(r)  # a generated robot is written for the run
         if missing is not None:
             print(f"modelgap suite: skipping robot {r}: {missing}")
         else:

@@ -55,3 +55,20 @@ def test_a_clean_case_the_robot_cannot_do_is_an_error_naming_it(monkeypatch, tmp
     with pytest.raises(IKError, match="the model-gap case clean seed 3 on a3: stance standing"):
         mg.run_job(("a3", "clean", None, 3, None, mg.DEFAULT_CALIBRATOR), str(tmp_path), PROV)
     assert not list(tmp_path.rglob("*.json"))
+
+
+def test_a_generated_robot_runs_by_name_its_model_written_beside_the_cases(monkeypatch, tmp_path):
+    seen = []
+
+    def fake(robot, kind, name, seed, stances=None, calibrator=mg.DEFAULT_CALIBRATOR, collect=None):
+        seen.append(robot)
+        return {"robot": "five_joint", "kind": kind, "name": name, "seed": seed, "selected": [], "ambiguous": [],
+                "verdict": "explained", "p_value": 0.5, "z": 0.0, "scale": None, "confounded": [],
+                "at_truth": {"training": 1.0}, "offsets_rms_deg": {"before": 0.01, "after": 0.01}}
+
+    monkeypatch.setattr(mg, "run_case", fake)
+    monkeypatch.setattr(mg, "code_identity", lambda code: {"commit": "c0ffee"})
+    data = mg.run(["five_joint"], clean_seeds=1, cases=("clean",), workers=1, progress=False, out=tmp_path)
+    assert seen == [str(tmp_path / "_robots" / "five_joint.legmap.yaml")] * 2  # clean, clean_kinematic
+    case = json.loads((tmp_path / "five_joint" / "clean" / "seed00.json").read_text())
+    assert "robots=['five_joint']" in case["provenance"]["command"] and data["cases"]["computed"] == 2
