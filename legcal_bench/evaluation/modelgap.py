@@ -629,15 +629,7 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                 continue
             say(f"fit + {name}")
             ev = nested(ctx, current, name, held_by)
-            k = ev.k - current.k
-            d = current.chi2 - ev.chi2
-            move = np.abs(ev.fit.x[:n_q] - current.fit.x[:n_q]) / sigma0
-            bad = inadmissible(ctx, ev, [name, *selected])
-            rows.append({"effect": name, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
-                         "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
-                         "max_offset_move_sigmas": float(move.max()),
-                         "moves_offsets": bool(move.max() > MOVE_SIGMAS),
-                         "admissible": not bad, "inadmissible": bad})
+            rows.append(_step_row(name, ev, current, inadmissible(ctx, ev, [name, *selected]), ln_n, sigma0))
         for r in rows:
             r["passes_cv"] = None
         passing = [r for r in rows if r["passes_bic"] and r["moves_offsets"] and r["admissible"]]
@@ -668,8 +660,9 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
     # pair that explains the data together (a link length with an IMU tilt, issue #61).
     # Where the path ends with a residual left, every pair of candidates is fitted from
     # the offsets-only model and one that explains the data takes the path's place.
-    if significant and not ambiguous and MAX_EFFECTS >= 2 and _fires(_after_test(current, cv_current, cv_dof)):
-        pair = _pair_search(ctx, base, cv_base, fitted, tried, selected, held_by, ln_n, n_q, sigma0, say)
+    after = _after_test(current, cv_current, cv_dof)
+    if significant and not ambiguous and MAX_EFFECTS >= 2 and _fires(after):
+        pair = _pair_search(ctx, base, cv_base, fitted, tried, selected, held_by, ln_n, sigma0, say)
         if pair is not None:
             steps.append({"on_top_of": [], "pairs": True, "cv_chi2_current": cv_base,
                           "candidates": [{k: v for k, v in r.items() if k != "ev"} for r in pair["rows"]]})
@@ -677,8 +670,8 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
                 ambiguous = pair["ambiguous"]
             elif pair["best"] is not None:
                 selected, current, cv_current = list(pair["best"]["effects"]), pair["best"]["ev"], pair["best"]["cv_chi2"]
+                after = _after_test(current, cv_current, cv_dof)
     final = current  # the selected model at its optimum over every segment, frames kept
-    after = _after_test(final, cv_current, cv_dof)
     residual_left = _fires(after)
     excess = max(base.chi2 - base.dof, 1e-12)
     after["share_of_excess_left"] = max(final.chi2 - final.dof, 0.0) / excess
@@ -798,8 +791,21 @@ def _after_test(ev: Evaluated, cv: float | None, cv_dof: int) -> dict:
     return out
 
 
+def _step_row(effect: str, ev: Evaluated, against: Evaluated, bad: list, ln_n: float, sigma0: np.ndarray) -> dict:
+    """A selection step's row for model `ev` fitted on top of `against`: its chi2 drop
+    against the BIC penalty, its largest offset move in the offsets-only noise std
+    `sigma0` (MOVE_SIGMAS), and whether it is admissible (`bad`: why not)."""
+    n_q = len(sigma0)
+    k, d = ev.k - against.k, against.chi2 - ev.chi2
+    move = np.abs(ev.fit.x[:n_q] - against.fit.x[:n_q]) / sigma0
+    return {"effect": effect, "ev": ev, "delta_chi2": d, "k": k, "bic_penalty": k * ln_n,
+            "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
+            "max_offset_move_sigmas": float(move.max()), "moves_offsets": bool(move.max() > MOVE_SIGMAS),
+            "admissible": not bad, "inadmissible": bad}
+
+
 def _pair_search(ctx: Context, base: Evaluated, cv_base, fitted: list, tried, path, held_by: dict, ln_n: float,
-                 n_q: int, sigma0: np.ndarray, say) -> dict | None:
+                 sigma0: np.ndarray, say) -> dict | None:
     """Every pair of the candidates `tried` (but the greedy `path`'s own), each fitted
     from the offsets-only model `base`, scored as a selection step is: its drop beats
     the BIC penalty, it moves an offset, it is admissible, its left-out stances' chi2
@@ -826,13 +832,8 @@ def _pair_search(ctx: Context, base: Evaluated, cv_base, fitted: list, tried, pa
                     continue
                 bad = inadmissible(ctx, ev, [a, b])
                 fitted.append((f"{a} + {b}", ev, bad))
-            k, d = ev.k - base.k, base.chi2 - ev.chi2
-            move = np.abs(ev.fit.x[:n_q] - base.fit.x[:n_q]) / sigma0
-            r = {"effect": f"{a} + {b}", "effects": [a, b], "ev": ev, "delta_chi2": d, "k": k,
-                 "bic_penalty": k * ln_n, "bic": ev.chi2 + ev.k * ln_n, "passes_bic": bool(k > 0 and d > k * ln_n),
-                 "max_offset_move_sigmas": float(move.max()), "moves_offsets": bool(move.max() > MOVE_SIGMAS),
-                 "admissible": not bad, "inadmissible": bad, "explains": bool(ev.p_value >= ALPHA / 2),
-                 "cv_chi2": None}
+            r = {**_step_row(f"{a} + {b}", ev, base, bad, ln_n, sigma0), "effects": [a, b],
+                 "explains": bool(ev.p_value >= ALPHA / 2), "cv_chi2": None}
             if r["passes_bic"] and r["moves_offsets"] and r["admissible"] and r["explains"]:
                 say(f"cross-validation {a} + {b} (pair)")
                 r["cv_chi2"] = _cv(ev)[0]
