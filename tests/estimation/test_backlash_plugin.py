@@ -58,15 +58,14 @@ def test_the_law_and_the_fitting_model_are_one_law(backlash):
     assert low < 0 < high
 
 
-def test_a_backlash_beyond_a_gear_is_refused(backlash):
+def test_a_backlash_beyond_a_gear_is_refused(backlash, tmp_path):
+    from legcal_bench.benchmark.modelgap import _collect, _config
     from legcal_bench.sim.effects import parse_effect
 
-    parse_effect("backlash:joint=left_knee,deg=0.2")
-    from legcal_bench.benchmark.modelgap import _collect, _config
-
+    parse_effect("backlash:joint=left_knee,deg=0.2")  # a gear's play parses
     with pytest.raises(ConfigError, match=r"deg=5.0: a backlash is a play in \(0, 2\] deg"):
-        _collect(_config("a3", ("backlash:joint=left_knee,deg=5",), 0, collect_overrides={"stance_s": 2.0}),
-                 __import__("pathlib").Path(backlash.__file__).parent)
+        _collect(_config("a3", ("backlash:joint=left_knee,deg=5",), 0, collect_overrides={"stance_s": 2.0}), tmp_path)
+    assert not (tmp_path / "set" / "session.json").exists()  # refused before any recording
 
 
 def test_diagnose_names_the_backlash_recovers_its_width_and_scores_through_it(backlash, tmp_path):
