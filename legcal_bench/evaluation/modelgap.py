@@ -706,6 +706,14 @@ def diagnose(robot, recordings, start=None, effects=None, progress=None, prep: P
             if sp is not None and (generic["outside_selected"] or 0.0) > AMBIGUOUS_BIC:
                 generic["sparse_bic"] = sp.chi2 + sp.k * ln_n
                 rivals.append((f"{SPARSE} ({', '.join(generic['sparse'])})", generic["sparse_bic"]))
+            elif sp is not None and sp.chi2 + sp.k * ln_n - sel_bic < AMBIGUOUS_BIC:
+                # A geometry change the selected effects express (within the margin of
+                # their span) fitting as well: the same change, described without a
+                # name. The named description is preferred, and both are said (issue #61:
+                # a thigh length with an IMU roll against a sparse geometry, 16139 vs 16140).
+                generic["also_fits"] = {"columns": list(generic["sparse"]), "chi2": float(sp.chi2), "k": int(sp.k),
+                                        "bic_minus_selected": float(sp.chi2 + sp.k * ln_n - sel_bic),
+                                        "outside_selected": float(generic["outside_selected"] or 0.0)}
             name, best = min(rivals, key=lambda r: r[1])
             margin = best - sel_bic
             generic["bic_minus_selected"] = float(generic["bic"] - sel_bic)
@@ -961,8 +969,12 @@ def summary_line(rep: dict) -> str:
                 f" to tell them apart: {'; '.join(dict.fromkeys(a['remedy'] for a in rep['ambiguous']))}"
                 f"{_recommended_text(rep)}")
     a = rep["after"]
+    also = (rep.get("generic") or {}).get("also_fits")
+    both = (f"; a change of geometry fits as well (the sparse description: {', '.join(also['columns'])}; BIC "
+            f"{also['bic_minus_selected']:+.0f} against the selection's), a change the selected effects express "
+            f"({also['outside_selected']:.1f} of chi2 beyond their span): named by them") if also else ""
     return (f"{v}: {' + '.join(rep['selected'])} ({head} -> {a['chi2_per_dof']:.3f}, p = {a['p_value']:.2g})"
-            f"{_recommended_text(rep)}")
+            f"{both}{_recommended_text(rep)}")
 
 
 def family_text(generic: dict) -> str:

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from legcal_bench.data.recording import list_segments, load_session, load_truth
-from legcal_bench.evaluation.modelgap import diagnose
+from legcal_bench.evaluation.modelgap import AMBIGUOUS_BIC, diagnose
 from legcal_bench.protocol.collect import CollectConfig, collect
 from legcal_bench.robots import load_robot
 
@@ -57,6 +57,7 @@ def test_a_knee_encoder_scale_is_detected_and_named(tmp_path):
     rep = _diagnose(tmp_path, "encoder_scale:joint=left_knee,scale=0.005", seed=3,
                     effects=["encoder_scale", "leg_length", "imu_tilt"], stance_s=6.0)
     assert rep["verdict"] == "selected" and rep["selected"] == ["encoder_scale"]
+    assert "also_fits" not in rep["generic"] and "fits as well" not in rep["summary"]  # nothing else said
     p = rep["parameters"]["encoder_scale.left_knee"]
     assert abs(p["value"] - 0.005) < 4 * p["std"] + 2e-4
 
@@ -534,5 +535,10 @@ def test_a_pair_the_greedy_path_misses_is_found_by_the_pair_search(tmp_path):
     assert pairs.get("pairs"), [s["on_top_of"] for s in rep["steps"]]
     ok = [c["effect"] for c in pairs["candidates"] if c["passes_cv"]]
     assert ok == ["imu_tilt + leg_length"], ok
+    # A sparse geometry fits about as well (5 columns, BIC -6 of the pair's): a change the
+    # pair expresses, so the pair names it and the summary says both.
+    also = rep["generic"]["also_fits"]
+    assert abs(also["bic_minus_selected"]) < AMBIGUOUS_BIC and also["outside_selected"] < AMBIGUOUS_BIC, also
+    assert "a change of geometry fits as well (the sparse description: " in rep["summary"]
     err = np.rad2deg(np.sqrt(np.mean((np.array(list(rep["offsets_rad"].values())) - truth.offsets) ** 2)))
     assert err < 0.02, err
