@@ -697,11 +697,15 @@ def summarize(rows: list[dict]) -> list[dict]:
             leg = [r["localization"]["location"] == f"{r['side']} leg" and not t for r, t in zip(rs, tied)]
             chan = [refs.get((o, r["side"])) is not None
                     and r["localization"]["channel"] == refs[(o, r["side"])]["channel"] for r in rs]
+            old = [localization_at_8e37d19(r["localization"]) for r in rs]
             unexplained = [r["verdict"] == "unexplained" for r in rs]
             out.append({"robot": robot, "case": f"outside: {o}", "seeds": len(rs),
                         "unexplained": sum(unexplained),
                         "unexplained_leg_and_channel": sum(u and a and b for u, a, b in zip(unexplained, leg, chan)),
                         "leg_correct": sum(leg), "tied": sum(tied),
+                        "leg_correct_8e37d19": (None if None in old else
+                                                sum(o == (f"{r['side']} leg", False) for o, r in zip(old, rs))),
+                        "tied_8e37d19": None if None in old else sum(t for _, t in old),
                         "other_leg_claimed": sum(r["localization"]["location"].endswith(" leg") and not t
                                                  and not ok for r, t, ok in zip(rs, tied, leg)),
                         "channel_as_reference": sum(chan),
@@ -815,6 +819,18 @@ def pick_at_8e37d19(r: dict) -> str | None:
         return cands[0]["name"] if cands else None
     low = min(c["cv_chi2"] for c in ok)
     return min((c for c in ok if c["cv_chi2"] - low < AMBIGUOUS_BIC), key=lambda c: (c["k"], c["cv_chi2"]))["name"]
+
+
+def localization_at_8e37d19(loc: dict) -> tuple[str, bool] | None:
+    """The localization the rule of 8e37d19 (before issue #61) makes of a row's: the
+    location of the largest excess chi2 (`strongest`), tied when another's excess is
+    within AMBIGUOUS_BIC of it (`margin`: the excesses are computed as they were then).
+    (location, tied); None for a row made before `strongest` was kept."""
+    from legcal_bench.evaluation.modelgap import AMBIGUOUS_BIC
+
+    if "strongest" not in loc or loc.get("margin") is None:
+        return None
+    return loc["strongest"], bool(loc["margin"] < AMBIGUOUS_BIC)
 
 
 HELDOUT_KINDS = ("clean", "clean_kinematic", "library", "near", "multi", "pair", "plugin", "outside")
@@ -1001,7 +1017,9 @@ def markdown(data: dict, made_by: str, code: str) -> str:
         elif s["case"].startswith("outside"):
             L.append(f"| {s['robot']} | {s['case']} | {s['seeds']} | {s['unexplained']} unexplained | "
                      f"{s['unexplained_leg_and_channel']}/{s['seeds']} with leg and channel (leg {s['leg_correct']}, "
-                     f"tie {s.get('tied', '–')}, the other leg {s.get('other_leg_claimed', '–')}, "
+                     f"tie {s.get('tied', '–')}, the other leg {s.get('other_leg_claimed', '–')}"
+                     + (f"; at 8e37d19 leg {s['leg_correct_8e37d19']}, tie {s['tied_8e37d19']}"
+                        if s.get("leg_correct_8e37d19") is not None else "") + "; "
                      f"channel {s['channel_as_reference']}; reference {', '.join(s['reference_channels'])}) | "
                      f"{s['wrong_confident']} | – | – | – | – | {v} |")
         else:

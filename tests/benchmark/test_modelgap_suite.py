@@ -361,3 +361,20 @@ def test_a_plugin_spec_runs_its_seeds_beside_the_groups_asked_and_is_named_when_
             _row("plugin", spec, [], "unexplained", seed=2)]
     s = next(s for s in summarize(rows) if s["case"] == f"plugin: {spec}")
     assert (s["seeds"], s["correct"], s["wrong_confident"], s["detected"]) == (3, 1, 1, 3)
+
+
+def test_the_localization_of_8e37d19_is_read_off_the_same_rows():
+    # 8e37d19: the largest excess, tied when another's is within AMBIGUOUS_BIC (10) of it.
+    # Now: the likelihood ratio against each alternative (a tie where the best adds
+    # nothing significant beyond the other leg), as on the A3-like ankle_axes_distance
+    # seed 3 at 018cd19 (25.8 of excess ahead, 29.5 of chi2 on 12 dof beyond: a tie now).
+    ahead = {"location": "right leg", "strongest": "right leg", "margin": 25.8, "tied_with": ["left leg"],
+             "channel": "flat_height"}
+    close = {"location": "left leg", "strongest": "left leg", "margin": 4.0, "tied_with": [], "channel": "flat_height"}
+    assert mg.localization_at_8e37d19(ahead) == ("right leg", False)
+    assert mg.localization_at_8e37d19(close) == ("left leg", True)
+    assert mg.localization_at_8e37d19({"location": "left leg", "tied_with": [], "margin": 30.0}) is None  # older row
+    rows = [_row("outside", "ankle_axes_distance", [], "unexplained", seed=3, side="right", localization=ahead),
+            _row("outside", "ankle_axes_distance", [], "unexplained", seed=0, side="left", localization=close)]
+    s = next(s for s in summarize(rows) if s["case"] == "outside: ankle_axes_distance")
+    assert (s["leg_correct"], s["tied"], s["leg_correct_8e37d19"], s["tied_8e37d19"]) == (1, 1, 1, 1)
