@@ -238,6 +238,12 @@ def test_localization_weighs_each_location_by_what_it_explains_beyond_the_other(
     # Every joint of both legs: each leg explains 3000 the other cannot.
     both = localize(locs(4000.0, 4340.0), pairs(7340.0, 4003.0, 4343.0))
     assert both["location"] == BOTH_LEGS and "not one leg's" in where_text(both)
+    # A large effect of the right leg (a shank twisted, A2-like at 66f0014): the left leg's
+    # columns take up a remainder, significant (60 on 21 dof) but under ALSO_SHARE of what
+    # the right adds beyond the left: the right leg, not both.
+    big = localize(locs(20000.0, 80000.0), pairs(80060.0, 20003.0, 80003.0))
+    assert big["evidence"]["left leg"]["beyond_best"]["log10_p"] < -3
+    assert big["location"] == "right leg" and big["also_in"] == [] and "adds 60 beyond it" in where_text(big)
     # Excesses 340 apart said nothing before: the right leg was named "by 340 of chi2".
     assert localize(locs(4000.0, 4340.0))["location"] == "right leg"
 
