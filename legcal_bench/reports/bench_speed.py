@@ -1,12 +1,12 @@
 """`legcal-bench bench-speed`: where users wait, timed, the code at hand against an
 older commit in one run.
 
-The baseline commit (default `BASELINE`, the last commit before issue #36) is installed
-into a temporary folder beside the code at hand (`git archive` + `pip install --no-deps
---target`); each group's probe script, always the one of the code at hand and using only
-interfaces both versions have, runs in its own process once per version with the
-version on PYTHONPATH, the two alternating (old first, then new first) for `rounds`
-rounds, on the same inputs:
+The baseline commit (default `BASELINE`, the last commit before issue #36) is checked
+out into a temporary folder beside the code at hand (a local clone, `install_baseline`);
+each group's probe script, always the one of the code at hand and using only interfaces
+both versions have, runs in its own process once per version with the version on
+PYTHONPATH, the two alternating (old first, then new first) for `rounds` rounds, on the
+same inputs:
 
   calibration  `speed_probe.py --only calibration`: calibrators in-process on one A3-like
                weld session set (realistic sensors, 4 stances; collected once, by the code
@@ -24,7 +24,7 @@ rounds, on the same inputs:
                own tests and settings) in its source tree, wall, counts and the slowest 20.
 
 Reported: per case the medians, the ratio old/new (speed-up; for rates new/old), the
-target and whether it is met; per calibration stage the same; for the calibrators the
+target and whether it is met (a case one version does not have: "not in the baseline"); per calibration stage the same; for the calibrators the
 largest difference between the two versions' offsets (the same answer, faster). Writes
 `report.md` and `report.json`, and prints the markdown. Each probe run is kept in
 `partial.json` beside them as it finishes: a run stopped part-way (interrupted, a probe
@@ -117,34 +117,68 @@ def _repo_root() -> Path:
     return Path(out.stdout.strip())
 
 
-def install_baseline(rev: str, work: Path) -> tuple[Path, Path]:
-    """Install commit `rev` (code only, no dependencies) into `work`; returns (the folder
-    to put on PYTHONPATH, its source tree)."""
+def install_baseline(rev: str, work: Path) -> Path:
+    """A local clone of this repository at commit `rev` in `work/src` (a real checkout,
+    so its tests run as they did: git, its own source tree), importable by putting it
+    on PYTHONPATH; returns the clone.
+
+    A package the clone's pyproject maps from another folder (`legcal_bench.calibrators`
+    from `calibrators/`, ...) is linked into its package folder, untracked and excluded
+    from its status: imported from the clone, `legcal_bench.calibrators` is then the
+    baseline's, not the editable install's of the code at hand."""
+    import tomllib
+
     root = _repo_root()
-    src, site = work / "src", work / "site"
-    src.mkdir(parents=True)
-    archive = subprocess.run(["git", "archive", "--format=tar", rev], cwd=root, capture_output=True, check=False)
-    if archive.returncode != 0:
+    src = work / "src"
+    work.mkdir(parents=True, exist_ok=True)
+    clone = subprocess.run(["git", "clone", "--quiet", "--shared", "--no-checkout", str(root), str(src)],
+                           capture_output=True, text=True, check=False)
+    checkout = clone if clone.returncode else subprocess.run(
+        ["git", "-C", str(src), "checkout", "--quiet", "--detach", rev], capture_output=True, text=True, check=False)
+    if checkout.returncode != 0:
         raise ConfigError(f"bench-speed --baseline {rev!r}: not a commit of this repository "
-                          f"({archive.stderr.decode().strip()})")
-    subprocess.run(["tar", "-x", "-C", str(src)], input=archive.stdout, check=True)
+                          f"({checkout.stderr.strip()}); give a commit of `git log`, or none")
     shared = root.parent / "shared"
     if shared.is_dir():  # the examples' ../shared (the G1's model), as beside the checkout: its tests run too
-        (src.parent / "shared").symlink_to(shared)
-    subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--disable-pip-version-check", "--no-deps",
-                    "--no-build-isolation", "--target", str(site), str(src)], check=True, capture_output=True)
-    # The tree's tests import the installed baseline (`site`, on PYTHONPATH): its source
-    # package, first on sys.path in the tree, would take the package's other folders
-    # (calibrators/, envs/, policies/) from the code at hand's editable install.
-    (src / "legcal_bench").rename(src / "legcal_bench.source")
-    return site, src
+        (work / "shared").symlink_to(shared)
+    pyproject = src / "pyproject.toml"
+    config = tomllib.loads(pyproject.read_text()) if pyproject.is_file() else {}
+    mapped = config.get("tool", {}).get("setuptools", {}).get("package-dir", {})
+    links = [_metadata(src, config.get("project", {}))]
+    for package, folder in mapped.items():
+        parent, _, name = package.rpartition(".")
+        link = src / parent.replace(".", "/") / name
+        if parent and not link.exists() and (src / folder).is_dir():
+            link.symlink_to(os.path.relpath(src / folder, link.parent), target_is_directory=True)
+            links.append(link.relative_to(src).as_posix())
+    with open(src / ".git" / "info" / "exclude", "a") as f:
+        f.write("".join(f"/{p}\n" for p in links))
+    return src
+
+
+def _metadata(src: Path, project: dict) -> str:
+    """The clone's own package metadata (a dist-info beside its packages, what an install
+    would write): its entry points (calibrators, effects) are found before the code at
+    hand's, whose names a baseline may not have. Returns its folder's name."""
+    name = project.get("name", "legcal-bench").replace("-", "_")
+    folder = src / f"{name}-{project.get('version', '0')}.dist-info"
+    folder.mkdir()
+    (folder / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project.get('name', 'legcal-bench')}\n"
+                                     f"Version: {project.get('version', '0')}\n")
+    groups = {**({"console_scripts": project["scripts"]} if "scripts" in project else {}),
+              **project.get("entry-points", {})}
+    (folder / "entry_points.txt").write_text("".join(
+        f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()) + "\n"
+        for group, points in groups.items()))
+    return folder.name
 
 
 def run_probe(group: str, repeats: int, pythonpath: Path | None, data: str, robot: str, src: Path) -> dict:
-    """One run of `group`'s probe on one version (`pythonpath`: the baseline's install;
-    None: the code at hand)."""
+    """One run of `group`'s probe on one version (`pythonpath`: the baseline's clone;
+    None: the code at hand). Both versions cache their bytecode (PYTHONDONTWRITEBYTECODE
+    dropped): otherwise the clone, with no cache yet, compiles every module every time."""
     script, extra, _ = GROUPS[group]
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "PYTHONDONTWRITEBYTECODE")}
     env.update(ENVIRONMENT)
     if pythonpath is not None:
         env["PYTHONPATH"] = str(pythonpath)
@@ -160,9 +194,9 @@ def run_probe(group: str, repeats: int, pythonpath: Path | None, data: str, robo
 
 
 def _median(runs: list[dict], case: str, stage: str | None = None) -> float | None:
-    values = [v for r in runs for v in (r["cases"][case]["values"] if stage is None else
-                                        r["cases"][case].get("stages", {}).get(stage, []))
-              if case in r["cases"]]
+    values = [v for r in runs if case in r["cases"]
+              for v in (r["cases"][case]["values"] if stage is None else
+                        r["cases"][case].get("stages", {}).get(stage, []))]
     return statistics.median(values) if values else None
 
 
@@ -257,7 +291,7 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
             collect(CollectConfig(robot=robot, mode="weld", sensors="realistic"), data, progress=False)
             for path in list_segments(data):  # the format both read (a baseline before #39 reads version 1)
                 load_recording(path).save(path, version=1)
-        site, src = (None, None) if baseline == "none" else install_baseline(baseline, tmp / "baseline")
+        site = src = None if baseline == "none" else install_baseline(baseline, tmp / "baseline")
         for k in range(rounds):
             for group in groups:
                 n = repeats or GROUPS[group][2]
@@ -318,7 +352,8 @@ def render(out: str | Path, runs: dict, meta: dict) -> str:
         return "–" if v is None else (f"{v:.0f}" if v >= 100 else f"{v:.3f}")
 
     for r in rows:
-        speedup = "–" if r["speedup"] is None else f"{r['speedup']:.2f}x"
+        speedup = ("not in the baseline" if r["old"] is None and meta.get("baseline") != "none" else
+                   "–" if r["speedup"] is None else f"{r['speedup']:.2f}x")
         met = "–" if r["met"] is None else ("yes" if r["met"] else "NO")
         diff = r.get("max_offset_difference_deg")
         L.append(f"| {r['label']} | {fmt(r['old'])} | {fmt(r['new'])} | {speedup} | {r['target'] or '–'} | {met} | "

@@ -4,8 +4,8 @@ Run as a script (`python closed_loop_probe.py --repeats 5 [--trials 35]`), it pr
 JSON object: for each case the list of wall times (s), measured alternately, plus the
 module timed and the settings. It uses only the command line both old and new
 versions have (`legcal_bench.cli.main`, stdlib otherwise), so the same file times the
-code at hand and an older commit installed beside it (`pip install --no-deps --target
-DIR` of a `git archive`, run with `PYTHONPATH=DIR`).
+code at hand and an older commit checked out beside it (`bench_speed.install_baseline`,
+run with `PYTHONPATH=<its clone>`).
 
   walk_eval_a3   `legcal-bench walk-eval --robot a3 --policy <our A3-like walker> --trials N
                  --quiet`, every other setting the default a user gets: 2 local worker

@@ -6,8 +6,8 @@ Run as a script (`python modelgap_probe.py --repeats N`), it runs
 temporary folder, N times, and prints one JSON object: the wall seconds of each run
 (`<key>_total`, `--key`, default `modelgap`) and per session set (`<key>_per_set`), and
 the number of session sets a run diagnoses (`sets`). It uses
-only the command line, so it runs on an older commit installed beside the code at hand
-(`PYTHONPATH=<site> python modelgap_probe.py`), for a comparison in the same run.
+only the command line, so it runs on an older commit checked out beside the code at hand
+(`PYTHONPATH=<its clone> python modelgap_probe.py`), for a comparison in the same run.
 
 Each run starts in a fresh working folder (a link to this folder's `examples/` in it,
 so `examples/...` robots resolve as here): a suite that keeps its finished cases under

@@ -158,3 +158,65 @@ def test_the_tests_probe_runs_the_suite_as_its_trees_make_test_does(tmp_path, mo
     (old_argv, old_env), (new_argv, new_env) = seen
     assert old_argv[3:5] == new_argv[3:5] == ["-n", "2"]
     assert old_env["PYTHONDONTWRITEBYTECODE"] == "1" and "PYTHONDONTWRITEBYTECODE" not in new_env
+
+
+def test_a_case_the_baseline_lacks_is_reported_as_such_not_a_key_error(tmp_path, monkeypatch):
+    # The default baseline's probe runs have no `interfoot_door` (the door is younger).
+    from legcal_bench.reports import bench_speed
+
+    runs = {"calibration": {
+        "old": [_run({"interfoot_solve": {"unit": "s", "values": [0.2]}})],
+        "new": [_run({"interfoot_solve": {"unit": "s", "values": [0.1]},
+                      "interfoot_door": {"unit": "s", "values": [0.3]}})]}}
+    rows, _ = summarize(runs)
+    door = next(r for r in rows if r["case"] == "interfoot_door")
+    assert door["old"] is None and door["speedup"] is None and door["new"] == 0.3
+    text = bench_speed.render(tmp_path, runs, {"command": "c", "provenance": {"commit": "x", "dirty": False},
+                                                "baseline": "4bd338d", "rounds": 1, "repeats": {}})
+    assert "| 0.300 | not in the baseline |" in text and "| 0.100 | 2.00x |" in text
+
+
+def test_the_baseline_is_a_checkout_whose_packages_are_its_own(tmp_path):
+    """A local clone at the commit (git works in it, so its tests run), and imported from
+    it, the packages pyproject maps from other folders are the clone's too, not the
+    editable install's of the code at hand."""
+    import os
+    import subprocess
+    import sys
+
+    from legcal_bench.reports.bench_speed import _repo_root, install_baseline
+
+    head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=_repo_root(), capture_output=True, text=True,
+                          check=True).stdout.strip()
+    src = install_baseline(head, tmp_path / "baseline")
+    assert subprocess.run(["git", "rev-parse", "HEAD"], cwd=src, capture_output=True, text=True,
+                          check=True).stdout.strip() == head
+    assert subprocess.run(["git", "status", "--porcelain"], cwd=src, capture_output=True, text=True,
+                          check=True).stdout == ""  # the links are excluded: the clone is not dirty
+    where = subprocess.run(
+        [sys.executable, "-c", "import legcal_bench.calibrators as c, legcal_bench.envs as e; "
+                               "from importlib.metadata import entry_points; "
+                               "print(c.__file__); print(e.__file__); "
+                               "print(entry_points(group='legcal_bench.calibrators')['interfoot'].load().__module__ "
+                               "and __import__('sys').modules['legcal_bench.calibrators.interfoot'].__file__)"],
+        env={**os.environ, "PYTHONPATH": str(src)}, cwd=tmp_path, capture_output=True, text=True, check=True)
+    for line in where.stdout.split():
+        assert os.path.realpath(line).startswith(os.path.realpath(src)), line
+    with pytest.raises(Exception, match="not a commit"):
+        install_baseline("no-such-commit", tmp_path / "other")
+
+
+def test_the_calibration_probe_runs_and_reports_on_the_code_at_hand(collected):
+    # What bench-speed runs for its calibration group, on a small set (one repeat): every
+    # case reports a time and the offsets, the stages of the end-to-end ones. No speed.
+    from legcal_bench.reports import bench_speed
+    from legcal_bench.reports.speed_probe import CALIBRATION_CASES
+
+    data = collected(robot="a3", mode="kinematic", sensors="realistic", seed=0, heldout=0, stance_s=4.0)
+    out = bench_speed.run_probe("calibration", 1, None, str(data), "a3", bench_speed.HERE.parents[1])
+    assert set(out["cases"]) == {*CALIBRATION_CASES, "interfoot_door"}
+    for name, case in out["cases"].items():
+        assert len(case["values"]) == 1 and case["values"][0] > 0 and len(case["offsets"]) == 12, name
+    assert {"solve", "total"} <= set(out["cases"]["interfoot_end_to_end"]["stages"])
+    rows, stages = summarize({"calibration": {"old": [], "new": [out]}})
+    assert len(rows) == len(out["cases"]) and stages
