@@ -45,3 +45,38 @@ def test_a_segment_too_short_to_smooth_comes_back_unchanged():
     t, _, noisy = _wrenches(seconds=0.05)
     assert savgol_resampled(t, noisy, FT_WINDOW_S, 2) is None or len(t) >= 4
     np.testing.assert_array_equal(smooth_wrenches(t[:3], noisy[:3]), noisy[:3])
+
+
+@pytest.mark.parametrize("window,polyorder,deriv,n,axis", [(5, 2, 0, 9, 0), (51, 2, 0, 400, 0), (25, 3, 1, 300, 1),
+                                                           (11, 2, 2, 11, 0), (101, 2, 2, 1000, 0), (7, 4, 3, 50, 2)])
+def test_our_savitzky_golay_is_scipy_signals(window, polyorder, deriv, n, axis):
+    # Ours in numpy (scipy.signal's import costs a process ~0.6 s), held to scipy.signal's:
+    # the interior, both edges (mode "interp"), derivatives with a sample spacing, any axis.
+    from scipy import signal
+
+    from legcal_bench.estimation.problem import smoothing
+
+    rng = np.random.default_rng(window + n)
+    shape = [3, 4, 2]
+    shape.insert(axis, n)
+    x = rng.normal(size=shape) + np.linspace(0, 5, n).reshape([-1 if k == axis else 1 for k in range(4)]) ** 2
+    theirs = signal.savgol_coeffs(window, polyorder, deriv, delta=0.02)
+    np.testing.assert_allclose(smoothing.savgol_coeffs(window, polyorder, deriv, delta=0.02), theirs,
+                               rtol=0, atol=1e-12 * np.abs(theirs).max())
+    ours = smoothing.savgol_filter(x, window, polyorder, deriv=deriv, delta=0.02, axis=axis)
+    theirs = signal.savgol_filter(x, window, polyorder, deriv=deriv, delta=0.02, axis=axis, mode="interp")
+    np.testing.assert_allclose(ours, theirs, rtol=1e-9, atol=1e-9 * np.abs(theirs).max())
+    assert ours.shape == x.shape
+
+
+def test_the_calibration_path_imports_neither_scipy_signal_nor_scipy_stats():
+    # Their imports cost a process ~0.6 s and ~0.4 s (scipy 1.17) for two filters and two
+    # chi-square tails: a calibration in a fresh process loads neither.
+    import subprocess
+    import sys
+
+    code = ("import sys; import legcal_bench.calibrators.base, legcal_bench.calibrators.interfoot, "
+            "legcal_bench.calibrators.yamane, legcal_bench.data.recording; "
+            "print(sorted(m for m in sys.modules if m in ('scipy.signal', 'scipy.stats')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -13,9 +13,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
 
-from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, shared_misfit
+from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, chi2_logsf, shared_misfit
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
 from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
@@ -57,7 +56,7 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
             scale = 1.0
         elif len(raw) >= 3:
             # the least consistent stance (log p, then chi2/dof where log p underflows too)
-            worst = min(raw, key=lambda c: (chi2_dist.logsf(c.chi2, c.dof), -c.chi2 / c.dof)).recording
+            worst = min(raw, key=lambda c: (chi2_logsf(c.chi2, c.dof), -c.chi2 / c.dof)).recording
             sub, dq_sub, sub_items = _without(prep, problem, dq, sig, worst, weights)
             scale = shared_misfit([c.chi2 / c.dof for c in check_stances(sub_items, sig["encoder"])])
         results = raw if scale == 1.0 else check_stances(items, sig["encoder"], scale=scale)

@@ -57,12 +57,11 @@ from functools import lru_cache
 from time import perf_counter
 
 import numpy as np
-from scipy.signal import savgol_coeffs
 
 from legcal_bench.data.recording import MOTIONS, Recording
 from legcal_bench.estimation.imu.imu_motion import IMU_WINDOW_S, imu_acceleration
 from legcal_bench.estimation.imu.imu_motion import POLYORDER as IMU_POLYORDER
-from legcal_bench.estimation.problem.smoothing import savgol_resampled
+from legcal_bench.estimation.problem.smoothing import savgol_coeffs, savgol_resampled
 from legcal_bench.estimation.verdict import HARMLESS, Finding
 from legcal_bench.robots.kinematics import LegKinematics, frame_kinematics
 

@@ -18,9 +18,9 @@ length) is smooth in the posture and stays in s: it is not mistaken for noise.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_coeffs, savgol_filter
 
 from legcal_bench.estimation.imu.imu_motion import compensate
+from legcal_bench.estimation.problem.smoothing import savgol_coeffs, savgol_filter
 from legcal_bench.robots.kinematics import LegKinematics
 
 WINDOW_S = 1.0  # with 0.3 s the G1's excess hardly shows (1.01x): most of it lies at 1-3 Hz

@@ -16,11 +16,55 @@ Two users:
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
-from scipy.signal import savgol_filter
 
 FT_WINDOW_S = 1.0  # the wrenches' smoothing window (s)
 FT_POLYORDER = 2
+
+
+# The Savitzky-Golay filter itself, as `scipy.signal.savgol_coeffs` / `savgol_filter`
+# (mode "interp") compute it, in numpy: importing scipy.signal costs a process ~0.6 s at
+# scipy 1.17 (each of its functions' docstrings parsed at import, for its array-API
+# notes), and every calibration's first call paid it for these two functions.
+# tests/estimation/test_smoothing.py holds them to scipy.signal's to 1e-12.
+def savgol_coeffs(window: int, polyorder: int, deriv: int = 0, delta: float = 1.0) -> np.ndarray:
+    """(window,) the filter's weights as `scipy.signal.savgol_coeffs` returns them (its
+    default `use="conv"`: reversed against the samples they weigh; the filter's output
+    at a sample is their convolution with the samples around it). `window` odd."""
+    half = window // 2
+    x = np.arange(-half, half + 1, dtype=float)
+    vander = x[:, None] ** np.arange(polyorder + 1)  # (window, polyorder + 1)
+    # The least-squares polynomial's `deriv`-th coefficient as weights on the samples.
+    weights = np.linalg.pinv(vander)[deriv] * (math.factorial(deriv) / delta**deriv)
+    return weights[::-1].copy()
+
+
+def savgol_filter(x: np.ndarray, window: int, polyorder: int, deriv: int = 0, delta: float = 1.0,
+                  axis: int = 0) -> np.ndarray:
+    """`scipy.signal.savgol_filter(x, window, polyorder, deriv, delta, axis, mode="interp")`:
+    inside, each sample's window fitted by a polynomial of `polyorder` and its
+    `deriv`-th derivative read at the centre; within half a window of either end, the
+    polynomial fitted to the first (last) `window` samples read there."""
+    x = np.moveaxis(np.asarray(x, dtype=float), axis, 0)
+    n, half = x.shape[0], window // 2
+    if window > n:
+        raise ValueError(f"savgol_filter: window {window} is longer than the {n} samples")
+    flat = x.reshape(n, -1)
+    y = np.empty_like(flat)
+    windows = np.lib.stride_tricks.sliding_window_view(flat, window, axis=0)  # (n - window + 1, m, window)
+    y[half:n - half] = windows @ savgol_coeffs(window, polyorder, deriv, delta)[::-1]
+    t = np.arange(window, dtype=float)
+    vander = t[:, None] ** np.arange(polyorder + 1)
+    powers = np.arange(polyorder + 1)
+    # d^deriv/dt^deriv of t^p = p!/(p - deriv)! t^(p - deriv)
+    scale = np.array([math.perm(p, deriv) for p in powers], dtype=float) / delta**deriv
+    for rows, at in ((slice(0, window), np.arange(half)), (slice(n - window, n), np.arange(window - half, window))):
+        coef = np.linalg.lstsq(vander, flat[rows], rcond=None)[0]  # (polyorder + 1, m)
+        basis = np.where(powers >= deriv, at[:, None].astype(float) ** np.maximum(powers - deriv, 0), 0.0) * scale
+        y[rows][at] = basis @ coef
+    return np.moveaxis(y.reshape(x.shape), 0, axis)
 
 
 def savgol_resampled(time: np.ndarray, values: np.ndarray, window_s: float, polyorder: int, deriv: int = 0
@@ -42,7 +86,7 @@ def savgol_resampled(time: np.ndarray, values: np.ndarray, window_s: float, poly
     grid = time[0] + dt * np.arange(n)
     flat = values.reshape(n, -1)
     uniform = np.column_stack([np.interp(grid, time, flat[:, i]) for i in range(flat.shape[1])])
-    fitted = savgol_filter(uniform, width, polyorder, deriv=deriv, delta=dt, axis=0, mode="interp")
+    fitted = savgol_filter(uniform, width, polyorder, deriv=deriv, delta=dt, axis=0)
     back = np.column_stack([np.interp(time, grid, fitted[:, i]) for i in range(flat.shape[1])])
     return back.reshape(values.shape)
 
