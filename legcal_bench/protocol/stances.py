@@ -27,7 +27,6 @@ from legcal_bench.robots.kinematics import (
     LegKinematics, RobotDims, reachable_postures, reached_as_commanded,
 )
 from legcal_bench.robots.legmap import SIDES
-from legcal_bench.sim.double_support import posture_ik
 
 
 @dataclass(frozen=True)
@@ -446,6 +445,10 @@ def feasible_trajectory(kin: LegKinematics, placement: Placement, duration: floa
     reachable ones),
     with `return_q` a `Motion`: also their joint angles (N, n) on `kin` (the whole
     trajectory's IK is solved in one batch, `posture_ik`) and the amplitude scale used."""
+    # Here, not at the top: the stances' table is read by the data checks of every
+    # calibration, and the simulator's module loads dm_control (~0.2 s of a first call).
+    from legcal_bench.sim.double_support import posture_ik
+
     margin = 0.25 * kin.dims.sole_width
     base = posture_trajectory(placement, kin.dims, duration, rate_hz, rng, period_scale=period_scale,
                               axes=None if kin.reaches_any_sole_pose else followable_axes(kin, placement))
