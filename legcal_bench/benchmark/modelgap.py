@@ -953,12 +953,12 @@ def _within_noise(r: dict) -> bool:
     states for them allows: its squared Mahalanobis distance under that covariance
     (`run_case`'s `offsets_distance`) below the chi-square quantile NOISE_QUANTILE of the
     covariance's rank. Rows made before the covariance was stated: never."""
-    from scipy.stats import chi2
+    from legcal_bench.estimation.information.tails import chi2_ppf
 
     dist = _stated_distance(r)
     if not dist or not dist["dof"]:
         return False
-    return bool(dist["d2"] <= chi2.ppf(NOISE_QUANTILE, dist["dof"]))
+    return bool(dist["d2"] <= chi2_ppf(NOISE_QUANTILE, dist["dof"]))
 
 
 def _cell(x, nd: int) -> str:
@@ -1066,11 +1066,11 @@ def heldout_markdown(held: dict) -> list[str]:
 
 
 def _distance_text(b: dict) -> str:
-    from scipy.stats import chi2
+    from legcal_bench.estimation.information.tails import chi2_ppf
 
     d = b.get("stated_distance")
     return "" if not d else (f", the error's squared Mahalanobis distance under its covariance {d['d2']:.1f} on "
-                             f"{d['dof']} dof ({NOISE_QUANTILE:.0%}: {chi2.ppf(NOISE_QUANTILE, d['dof']):.1f})")
+                             f"{d['dof']} dof ({NOISE_QUANTILE:.0%}: {chi2_ppf(NOISE_QUANTILE, d['dof']):.1f})")
 
 
 def done_when_markdown(dw: dict) -> list[str]:

@@ -45,8 +45,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.stats import chi2 as chi2_dist
-from scipy.stats import f as f_dist
 
 from legcal_bench.estimation.modelgap.confounds import confound_report
 from legcal_bench.estimation.modelgap.effects import EffectModel, joint_loads, load_effects, registry, restricted
@@ -56,6 +54,7 @@ from legcal_bench.estimation.modelgap.signatures import (FAMILIES, GEOMETRY_FAMI
                                                          is_tilt, joint_columns, project_means, time_columns,
                                                          twist_place)
 from legcal_bench.estimation.imu.tilt_noise import measured_tilt_noise
+from legcal_bench.estimation.information.tails import chi2_logsf, chi2_sf, f_sf
 from legcal_bench.estimation.information.whitening import (ROW_CHANNELS, expected_rows, frame_covariances, whitened_system,
                                                whitening)
 from legcal_bench.data.recording import training
@@ -108,7 +107,7 @@ class Evaluated:
 
     @property
     def p_value(self) -> float:
-        return float(chi2_dist.sf(self.chi2, self.dof))
+        return float(chi2_sf(self.chi2, self.dof))
 
 
 @dataclass
@@ -376,7 +375,7 @@ def generic_fit(ctx: Context, base: Evaluated, selected=()) -> dict:
                 continue
             d = max(fit(own).chi2 - ev.chi2, 0.0)
             dof = len(keep) - len(own)
-            p = float(chi2_dist.sf(d, dof)) if dof > 0 else 1.0
+            p = float(chi2_sf(d, dof)) if dof > 0 else 1.0
             out[fam] = {"parameters": int(len(own)), "delta_chi2": float(d), "dof": int(dof), "p_value": p,
                         "consistent": p >= ALPHA}
         return out
@@ -480,8 +479,8 @@ def _gap(c: float, d: int, train: Evaluated) -> dict:
     every stance (which the training test already judges) from counting twice."""
     ratio = (c / d) / (train.chi2 / train.dof)
     return {"chi2": c, "dof": d, "chi2_per_dof": c / d, "ratio_to_training": ratio,
-            "p_value": float(f_dist.sf(ratio, d, train.dof)),
-            "p_value_vs_declared_noise": float(chi2_dist.sf(c, d))}
+            "p_value": float(f_sf(ratio, d, train.dof)),
+            "p_value_vs_declared_noise": float(chi2_sf(c, d))}
 
 
 def _fires(tests: dict) -> bool:
@@ -1246,7 +1245,7 @@ def _log10_sf(x: float, dof: int) -> float:
     y = x/2): finite, so very strong evidence still orders."""
     if dof <= 0:
         return 0.0
-    v = float(chi2_dist.logsf(x, dof))
+    v = float(chi2_logsf(x, dof))
     if np.isfinite(v):
         return v / np.log(10)
     from scipy.special import gammaln

@@ -70,13 +70,13 @@ def test_our_savitzky_golay_is_scipy_signals(window, polyorder, deriv, n, axis):
 
 
 def test_the_calibration_path_imports_neither_scipy_signal_nor_scipy_stats():
-    # Their imports cost a process ~0.6 s and ~0.4 s (scipy 1.17) for two filters and two
-    # chi-square tails: a calibration in a fresh process loads neither.
+    # Their imports cost a process ~0.6 s and ~0.4 s (scipy 1.17) for two filters and a
+    # few distribution tails: a calibration or a diagnosis in a fresh process loads neither.
     import subprocess
     import sys
 
     code = ("import sys; import legcal_bench.calibrators.base, legcal_bench.calibrators.interfoot, "
-            "legcal_bench.calibrators.yamane, legcal_bench.data.recording; "
+            "legcal_bench.calibrators.yamane, legcal_bench.data.recording, legcal_bench.evaluation.modelgap; "
             "print(sorted(m for m in sys.modules if m in ('scipy.signal', 'scipy.stats')))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

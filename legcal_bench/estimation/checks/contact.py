@@ -14,8 +14,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, chi2_logsf, shared_misfit
+from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, shared_misfit
 from legcal_bench.estimation.information.noise import noise_sigmas
+from legcal_bench.estimation.information.tails import chi2_logsf
 from legcal_bench.estimation.information.whitening import frame_covariances, whitening
 from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
 from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights, prepare_sensor

@@ -38,21 +38,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.special import chdtrc
 
-# The chi-square tail from scipy.special, what scipy.stats.chi2.sf evaluates (chdtrc):
-# importing scipy.stats costs a calibration's process ~0.4 s (scipy 1.17).
-
-
-def chi2_sf(x, dof):
-    """P(X > x) for X chi-square with `dof` degrees of freedom (`scipy.stats.chi2.sf`)."""
-    return chdtrc(dof, x)
-
-
-def chi2_logsf(x, dof):
-    """log P(X > x), -inf where it underflows (`scipy.stats.chi2.logsf` computes it so)."""
-    with np.errstate(divide="ignore"):
-        return np.log(chdtrc(dof, x))
+from legcal_bench.estimation.information.tails import chi2_sf
 
 ALPHA = 0.01  # family-wise false-alarm rate over a calibration's stances
 # Practical floor: a departure this small moves the offsets by less than the encoder
