@@ -22,7 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from legcal_bench.geometry.lie import Exp, Jr, adjoint, inverse
+from legcal_bench.geometry.lie import Exp, Jr
 from legcal_bench.robots.legmap import SIDES
 
 
@@ -54,49 +54,67 @@ class FactorChain:
     def legs(self, Q: np.ndarray, p: np.ndarray):
         """For the rows of Q (N, n) and parameters p (n_params,): per side (T (N, 4, 4)
         sole pose in the pelvis frame, Jq (N, 6, k) LOCAL sole Jacobian w.r.t. the leg's
-        k joints in leg-map order, Jp (N, 6, n_params) w.r.t. the parameters)."""
+        k joints in leg-map order, Jp (N, 6, n_params) w.r.t. the parameters).
+
+        Batched per side: the joints' exponentials in one call, the factors' (the same
+        for every frame) and their right Jacobians in one, the constant elements applied
+        by broadcasting, and Ad(B_i^-1) of every exponential element in one call."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        p = np.asarray(p, dtype=float)
         n = len(Q)
         out = {}
         for s_i, s in enumerate(SIDES):
             poe = self.poe[s]
-            elements: list[tuple] = []  # ("const", 4x4) | ("exp", (N,4,4), kind, payload)
-            inserted = {}
-            for f in self.factors:
-                if f.side == s:
-                    inserted.setdefault(f.after, []).append(f)
             nk = len(poe.cols)
+            mine = [f for f in self.factors if f.side == s]
+            zetas = np.array([p[f.cols] @ f.generators for f in mine]).reshape(len(mine), 6)
+            F_exp, F_jr = Exp(zetas), Jr(zetas)  # (F, 4, 4), (F, 6, 6)
+            twists = np.stack([poe.S[k][None] * Q[:, poe.cols[k], None] for k in range(nk)])  # (k, N, 6)
+            E_exp = Exp(twists)  # (k, N, 4, 4)
+            # The chain's elements in order: ("const", 4x4) | ("joint", k) | ("factor", index in `mine`).
+            elements: list[tuple] = []
+            by_after: dict[int, list[int]] = {}
+            for i, f in enumerate(mine):
+                by_after.setdefault(f.after, []).append(i)
             for e in range(2 * nk + 1):
                 if e == 2 * nk:
-                    elements.append(("const", poe.M_sole, None, None))
+                    elements.append(("const", poe.M_sole))
                 elif e % 2 == 0:
-                    elements.append(("const", poe.M[e // 2], None, None))
+                    elements.append(("const", poe.M[e // 2]))
                 else:
-                    k = e // 2
-                    twist = poe.S[k][None] * Q[:, poe.cols[k], None]
-                    elements.append(("exp", Exp(twist), "joint", k))
-                for f in inserted.get(e, []):
-                    zeta = np.asarray(p, dtype=float)[f.cols] @ f.generators  # (6,)
-                    elements.append(("exp", Exp(zeta)[None].repeat(n, axis=0), "factor", (f, zeta)))
-            # Suffix products B_i = elements[i+1] ... elements[-1].
-            B = [None] * len(elements)
+                    elements.append(("joint", e // 2))
+                elements += [("factor", i) for i in by_after.get(e, [])]
+            # Suffix products B_i = elements[i+1] ... elements[-1] of the exponential elements.
+            moving = [i for i, (kind, _) in enumerate(elements) if kind != "const"]
+            B = np.empty((len(moving), n, 4, 4))
             acc = np.broadcast_to(np.eye(4), (n, 4, 4)).copy()
+            slot = len(moving) - 1
             for i in range(len(elements) - 1, -1, -1):
-                B[i] = acc
-                acc = elements[i][1] @ acc
+                kind, what = elements[i]
+                if kind != "const":
+                    B[slot] = acc
+                    slot -= 1
+                acc = (what if kind == "const" else E_exp[what] if kind == "joint" else F_exp[what]) @ acc
             T = acc
+            Rt = np.swapaxes(B[..., :3, :3], -1, -2)  # (moving, N, 3, 3)
+            pos = B[..., :3, 3]
             Jq = np.zeros((n, 6, nk))
             Jp = np.zeros((n, 6, self.n_params))
-            for i, (kind, _, what, payload) in enumerate(elements):
-                if kind != "exp":
-                    continue
-                AdB = adjoint(inverse(B[i]))
-                if what == "joint":
-                    k = payload
-                    Jq[:, :, poe.cols[k] - nk * s_i] = AdB @ poe.S[k]
+            for slot, i in enumerate(moving):
+                kind, what = elements[i]
+                if kind == "joint":
+                    Jq[:, :, poe.cols[what] - nk * s_i] = _moved(Rt[slot], pos[slot], poe.S[what][:, None])[..., 0]
                 else:
-                    f, zeta = payload
-                    G = Jr(zeta) @ f.generators.T  # (6, P)
-                    Jp[:, :, f.cols] += AdB @ G
+                    f = mine[what]
+                    Jp[:, :, f.cols] += _moved(Rt[slot], pos[slot], F_jr[what] @ f.generators.T)
             out[s] = (T, Jq, Jp)
         return out
+
+
+def _moved(Rt: np.ndarray, p: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """(N, 6, P) Ad(B^-1) X for the poses B = [R p] (given as R^T (N, 3, 3) and p (N, 3))
+    and twists X (6, P) [v, w]: [R^T (v - p x w), R^T w], without forming the 6x6
+    adjoints."""
+    v, w = X[:3], X[3:]
+    pxw = np.cross(p[:, :, None], w[None], axis=1)  # (N, 3, P)
+    return np.concatenate([Rt @ (v[None] - pxw), Rt @ np.broadcast_to(w, (len(p), *w.shape))], axis=1)
