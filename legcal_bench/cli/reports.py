@@ -438,8 +438,8 @@ def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
                     help="rounds, each running the baseline and the code at hand, alternating which goes first "
                          "(default 2)")
     bs.add_argument("--baseline", default=BASELINE,
-                    help=f"commit to compare with (default {BASELINE}, the commit issue #36 measured); none: only "
-                         "the code at hand")
+                    help=f"commit to compare with, checked out in a local clone of this repository (default "
+                         f"{BASELINE}, the commit issue #36 measured); none: only the code at hand")
     _out(bs, "bench-speed", "reports/bench_speed", "the report (markdown and JSON)")
     bs.add_argument("--quiet", action="store_true", help="no progress lines (default: progress lines)")
     bs.add_argument("--rerender", action="store_true",
