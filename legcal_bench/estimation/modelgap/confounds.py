@@ -21,13 +21,14 @@ CONFOUND_SINE = 1e-3  # a column this close to the span of the others is not est
 CLOSE_COSINE = 0.7  # above this, two effects (or an effect and the offsets) are reported as close
 
 
-def _sine_to_span(col: np.ndarray, others: np.ndarray) -> float:
+def _sine_to_span(col: np.ndarray, others: np.ndarray, Q: np.ndarray | None = None) -> float:
+    """The sine of `col`'s angle to the span of `others` (Q: their `orth`, if in hand)."""
     n = np.linalg.norm(col)
     if n == 0:
         return 0.0
     if others.shape[1] == 0:
         return 1.0
-    Q = orth(others)
+    Q = orth(others) if Q is None else Q
     return float(np.linalg.norm(col - Q @ (Q.T @ col)) / n)
 
 
@@ -65,7 +66,7 @@ def confound_report(J: np.ndarray, model, joint_names: list[str]) -> dict:
         params = {}
         for i in range(sl.start, sl.stop):
             rest = np.delete(J, i, axis=1)
-            params[model.names[i]] = {"sine_to_offsets": _sine_to_span(J[:, i], Jq),
+            params[model.names[i]] = {"sine_to_offsets": _sine_to_span(J[:, i], Jq, Qq),
                                       "sine_to_all_others": _sine_to_span(J[:, i], rest)}
             # The closest other parameter once the offsets absorbed what they can (what a fit confuses it with).
             others = [j for j in range(model.n_offsets, J.shape[1]) if j != i]
