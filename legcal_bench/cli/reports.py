@@ -26,6 +26,11 @@ def cmd_bench_speed(a: argparse.Namespace) -> int:
     door(a, out=inputs.output_folder, repeats=RUN_COUNT, rounds=RUN_COUNT)
     from legcal_bench.reports.bench_speed import rerender, run_bench_speed
 
+    if a.readme:
+        from legcal_bench.reports.bench_speed import write_speed_line
+
+        print(f"wrote {a.readme}'s speed line: {write_speed_line(a.readme, a.out)}")
+        return 0
     if a.rerender:
         print(rerender(a.out))
         return 0
@@ -445,4 +450,7 @@ def _bench_speed_options(bs: argparse.ArgumentParser) -> None:
     bs.add_argument("--rerender", action="store_true",
                     help="run nothing: write --out's report again from the probe runs its report.json keeps, with "
                          "the labels and targets of the code at hand")
+    bs.add_argument("--readme", default=None, metavar="FILE",
+                    help="run nothing: write the speed line of --out's report into FILE (README.md), between its "
+                         "speed-line markers (added at the end if it has none); default: no FILE, nothing written")
     bs.set_defaults(func=cmd_bench_speed)

@@ -373,3 +373,48 @@ def render(out: str | Path, runs: dict, meta: dict) -> str:
                       "| s | phase | test |", "|---:|---|---|"]
                 L += [f"| {d['seconds']:.1f} | {d['phase']} | `{d['test']}` |" for d in run["slowest"]]
     return write_report(out, "\n".join(L) + "\n", {**meta, "rows": rows, "stages": stages, "runs": runs})
+
+
+# The README's speed line: written from a committed report by `bench-speed --out R
+# --readme README.md`, between these markers (the first names the report); a
+# test holds the README to the report it names.
+SPEED_LINE_CASES = (("interfoot_end_to_end_sensor", "calibrate (inter-foot, default setting)"),
+                    ("yamane_end_to_end", "Yamane"), ("help", "`legcal-bench --help`"))
+SPEED_LINE_START, SPEED_LINE_END = "<!-- speed line from ", "<!-- end of the speed line -->"
+
+
+def speed_line(report: dict) -> str:
+    """One line of where users wait, from a bench-speed report (its report.json): each
+    case's median now, against the baseline, with the command and commit behind it."""
+    rows = {r["case"]: r for r in report["rows"]}
+    parts = []
+    for case, label in SPEED_LINE_CASES:
+        r = rows.get(case)
+        if r is None or r["new"] is None:
+            continue
+        vs = "" if r["speedup"] is None else f" ({r['speedup']:.2f}x {report['baseline']}'s speed)"
+        parts.append(f"{label} {r['new']:.2f} s{vs}")
+    commit = (report.get("provenance") or {}).get("commit", "?")[:7]
+    return (f"Speed, warm and in-process but for start-up: {'; '.join(parts)}. From `{report['command']}` at "
+            f"{commit} on {report.get('machine') or 'this machine'}.")
+
+
+def write_speed_line(readme: str | Path, out: str | Path) -> str:
+    """Put `out`'s report's `speed_line` into `readme` between the markers (added at the
+    end if it has none); returns the line."""
+    from legcal_bench.files.reports import report_data
+
+    path = report_data(out)
+    if not path.is_file():
+        raise ConfigError(f"bench-speed --readme: {path} does not exist; run bench-speed --out {out} first")
+    line = speed_line(json.loads(path.read_text()))
+    readme = Path(readme)
+    text = readme.read_text()
+    block = f"{SPEED_LINE_START}{Path(out).as_posix()} -->\n{line}\n{SPEED_LINE_END}"
+    start, end = text.find(SPEED_LINE_START), text.find(SPEED_LINE_END)
+    if start >= 0 and end > start:
+        text = text[:start] + block + text[end + len(SPEED_LINE_END):]
+    else:
+        text = text.rstrip("\n") + "\n\n" + block + "\n"
+    atomic_write_text(readme, text)
+    return line

@@ -220,3 +220,28 @@ def test_the_calibration_probe_runs_and_reports_on_the_code_at_hand(collected):
     assert {"solve", "total"} <= set(out["cases"]["interfoot_end_to_end"]["stages"])
     rows, stages = summarize({"calibration": {"old": [], "new": [out]}})
     assert len(rows) == len(out["cases"]) and stages
+
+
+def test_the_readme_speed_line_is_the_report_it_names(tmp_path):
+    # Written by `bench-speed --out R --readme README.md`; edited by hand, or a report
+    # rerun without it, fails here.
+    import re
+
+    from legcal_bench.reports.bench_speed import SPEED_LINE_END, SPEED_LINE_START, speed_line, write_speed_line
+
+    root = HERE.parents[1]
+    text = (root / "README.md").read_text()
+    m = re.search(re.escape(SPEED_LINE_START) + r"(\S+) -->\n(.*)\n" + re.escape(SPEED_LINE_END), text)
+    assert m, "README.md has no speed line"
+    report = json.loads((root / m.group(1) / "report.json").read_text())
+    assert m.group(2) == speed_line(report)
+    assert "calibrate (inter-foot, default setting)" in m.group(2) and report["baseline"] in m.group(2)
+    # Written again into a copy: the same README; into a file without markers: appended.
+    copy = tmp_path / "README.md"
+    copy.write_text(text)
+    write_speed_line(copy, root / m.group(1))
+    assert copy.read_text().replace(str(root) + "/", "") == text
+    bare = tmp_path / "bare.md"
+    bare.write_text("# title\n")
+    line = write_speed_line(bare, root / m.group(1))
+    assert bare.read_text().startswith("# title\n\n" + SPEED_LINE_START) and line in bare.read_text()
