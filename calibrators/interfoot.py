@@ -48,8 +48,8 @@ from legcal_bench.estimation.information.observability import analyze, observabi
 from legcal_bench.estimation.information.uncertainty import (NO_NOISE, bound_warnings, imu_tilt_warnings, posterior,
                                                              uncertainty_warnings)
 from legcal_bench.estimation.modelgap.effects import load_effects
-from legcal_bench.estimation.problem.fit import (GLS_MAX_CHI2_PER_DOF, fit_effects, noise_posterior, offsets_fit,
-                                                 refine, tilt_response)
+from legcal_bench.estimation.problem.fit import (GLS_MAX_CHI2_PER_DOF, fit_effects, frame_whitening, noise_posterior,
+                                                 offsets_fit, refine, tilt_response)
 from legcal_bench.estimation.problem.stance import (GROSS_BOUND_RAD, GROSS_STAGES, JACOBIANS, MATCHED, SENSOR,
                                                     SOLVERS, FitOptions, InterFootWeights, Prepared, StanceProblem,
                                                     bound_diagnostics, gross_warnings, prepare, sensor_weights)
@@ -153,8 +153,12 @@ class InterFootCalibrator(Calibrator):
         t_solve = time.perf_counter() - t1
         t_contact = time.perf_counter()
         contacts, dropped = None, []
+        # The offsets-only fit's frames whitened at the declared noise, read by the contact
+        # check and the generalized least squares' first step alike: computed once.
+        start = (frame_whitening(prep, offsets_fit(prep, dq, problem.segments))
+                 if prep.whitens and self.contact_check != "off" else None)
         if self.contact_check != "off":
-            contacts = contact_check(prep, problem.segments, dq, solved=True)
+            contacts = contact_check(prep, problem.segments, dq, solved=True, start=start)
             flagged = [c for c in contacts or [] if c.flagged]
             warnings += [Finding(c.text(), DOUBTS) for c in flagged]
             kept = [s for s in problem.segments if s.recording not in {c.recording for c in flagged}]
@@ -164,6 +168,7 @@ class InterFootCalibrator(Calibrator):
                                         DOUBTS))
             elif flagged and self.contact_check == "drop":
                 dropped = [c.recording for c in flagged]
+                start = None  # of the stances before the drop
                 problem.build(kept)
                 dq, hist3 = problem.solve_gross(dq, opts)
                 hist2 += hist3
@@ -179,7 +184,7 @@ class InterFootCalibrator(Calibrator):
         t_gls = time.perf_counter()
         gls, gls_report = None, None
         if prep.whitens:  # generalized least squares from the row-weighted solution
-            gls = refine(prep, offsets_fit(prep, dq, problem.segments))
+            gls = refine(prep, offsets_fit(prep, dq, problem.segments), start)
             gls_report = {"steps": gls.steps, "converged": gls.converged, "chi2_per_dof": gls.chi2_per_dof,
                           "used": gls.holds}
             if not gls.holds:

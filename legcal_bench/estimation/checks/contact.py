@@ -17,15 +17,14 @@ import numpy as np
 from legcal_bench.estimation.checks.coplanarity import StanceContact, check_stances, shared_misfit
 from legcal_bench.estimation.information.noise import noise_sigmas
 from legcal_bench.estimation.information.tails import chi2_logsf
-from legcal_bench.estimation.information.whitening import frame_covariances, whitening
-from legcal_bench.estimation.problem.fit import NOISE_TILT, frame_residuals, offsets_fit
+from legcal_bench.estimation.problem.fit import NOISE_TILT, FrameWhitening, frame_whitening, offsets_fit
 from legcal_bench.estimation.problem.stance import Prepared, Segment, StanceProblem, noise_weights, prepare_sensor
 
 CONTACT_CHECKS = ("flag", "drop", "off")
 
 
 def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
-                  solved: bool = False) -> list[StanceContact] | None:
+                  solved: bool = False, start: FrameWhitening | None = None) -> list[StanceContact] | None:
     """The per-stance coplanarity check of `segments` (a fit's, after trimming), from
     offsets `dq0`: on the noise-weighted problem without priors whatever the fit's
     setting (a prior's pull would show as a departure), stances tested against the
@@ -36,7 +35,8 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
     declared noise holds, the stated fallback where it does not). `solved`: `dq0` is the optimum of `prep`'s weights over `segments`,
     so where those are the noise weights it is taken as it is, not solved for again.
     None when the recordings declare no noise to judge it against or have a single
-    stance."""
+    stance. `start`: the offsets-only fit's `frame_whitening` at `dq0` over `segments`, if
+    in hand (read where `dq0` is taken as it is)."""
     sig = noise_sigmas(prep.stances[0].sensor_model, prep.kin.dims.leg_length)
     if sig is None or len({s.recording for s in segments}) < 2:
         return None
@@ -46,8 +46,9 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
         dq = np.asarray(dq0, dtype=float)
     else:
         dq, _ = problem.solve(dq0, prep.options)
+        start = None  # at another point
     final: dict[str, StanceContact] = {}
-    items, scale = _stance_items(prep, problem, dq, sig), 1.0
+    items, scale = _stance_items(prep, problem, dq, sig, start), 1.0
     while True:
         raw, worst = check_stances(items, sig["encoder"]), None
         # judged at the shared misfit of the stances other than the worst; that scale is
@@ -96,23 +97,26 @@ def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) 
     return contact_check(prep, problem.segments, dq, solved=True)
 
 
-def _stance_items(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict) -> list[dict]:
+def _stance_items(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict,
+                  start: FrameWhitening | None = None) -> list[dict]:
     """`check_stances`'s input of each segment: its departure from one plane at the
     offsets of the other stances, and their covariance. The others' offsets come with a fixed error of the IMU's vertical as a nuisance, within the
     recordings' declared bound (`SensorModel.tilt_bound`, the prior's standard
     deviation): on a robot whose hip does not start with pitch, such a tilt moves the
     offsets differently with each stance's posture, and a realistic (uncalibrated) IMU
-    would otherwise read as soles off one plane."""
+    would otherwise read as soles off one plane. `start`: the offsets-only fit's
+    `frame_whitening` at `dq` over these segments, if in hand."""
     segs = problem.segments
     names = list(dict.fromkeys(s.recording for s in segs))
-    fr = frame_residuals(prep, offsets_fit(prep, dq, segs), segs)
+    fw = frame_whitening(prep, offsets_fit(prep, dq, segs)) if start is None else start
+    fr = fw.frames
     bound = prep.stances[0].sensor_model.tilt_bound
     tilt = np.arange(fr.model.n)[fr.model.slices[NOISE_TILT]][:2] if bound > 0 else np.zeros(0, dtype=int)
     nj = prep.kin.legmap.n_joints  # the offsets' columns; then the IMU tilt's
     cols = np.r_[np.arange(nj), tilt]
     prior = np.zeros((len(cols), len(cols)))
     prior[nj:, nj:] = np.eye(len(tilt)) / bound**2 if bound > 0 else 0.0
-    W, _ = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
+    W = fw.W
     Jw = W @ fr.J[:, :, cols]
     info = {n: np.einsum("kri,krj->ij", Jw[fr.recording == n], Jw[fr.recording == n]) for n in names}
     total = sum(info.values()) + prior

@@ -232,15 +232,36 @@ def whitened_rows(prep: Prepared, fit: ModelFit) -> tuple[np.ndarray, np.ndarray
     return z, Jw[:, :fit.model.n], rank
 
 
-def _whitened(prep: Prepared, fit: ModelFit) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`whitened_rows` with the IMU tilt's two columns last (`NOISE_TILT`, segment means
-    eliminated): how the rows move with a fixed error of the IMU's vertical."""
+@dataclass(frozen=True)
+class FrameWhitening:
+    """A fit's frame residuals at its estimate and each frame's whitening at the declared
+    noise (`frame_whitening`): the offsets-only fit's are read by the contact check and by
+    the generalized least squares' first step alike, so a calibration computes them once."""
+
+    frames: FrameResiduals
+    W: np.ndarray  # (N, 11, 11)
+    rank: np.ndarray  # (N,)
+
+
+def frame_whitening(prep: Prepared, fit: ModelFit) -> FrameWhitening:
+    """The frame residuals of `fit`'s segments at `fit` and their whitening by the
+    declared covariance (`whitening` of `frame_covariances`)."""
     sig = declared_noise(prep)
     fr = frame_residuals(prep, fit, fit.segments)
     W, rank = whitening(frame_covariances(fr.G, fr.H, sig["encoder"], sig["tilt"]))
+    return FrameWhitening(fr, W, rank)
+
+
+def _whitened(prep: Prepared, fit: ModelFit, at: FrameWhitening | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`whitened_rows` with the IMU tilt's two columns last (`NOISE_TILT`, segment means
+    eliminated): how the rows move with a fixed error of the IMU's vertical. `at`: the
+    fit's `frame_whitening`, if in hand."""
+    fw = frame_whitening(prep, fit) if at is None else at
+    fr = fw.frames
     tilt = fr.J[:, :, fr.model.slices[NOISE_TILT]][:, :, :2]
-    z, Jw = whitened_system(fr.r, np.concatenate([fr.J[:, :, :fit.model.n], tilt], axis=2), W)
-    return z, Jw, rank
+    z, Jw = whitened_system(fr.r, np.concatenate([fr.J[:, :, :fit.model.n], tilt], axis=2), fw.W)
+    return z, Jw, fw.rank
 
 
 REFINE_MAX_STEPS = 6
@@ -280,7 +301,7 @@ class Refined:
         return self.chi2_per_dof <= GLS_MAX_CHI2_PER_DOF
 
 
-def refine(prep: Prepared, fit: ModelFit) -> Refined:
+def refine(prep: Prepared, fit: ModelFit, start: FrameWhitening | None = None) -> Refined:
     """Generalized least squares from `fit`: Gauss-Newton steps of the problem whose
     every frame is whitened by its declared covariance (encoder noise through the chain,
     IMU tilt noise; the rows' correlations included) over the fit's free columns, loads
@@ -288,14 +309,16 @@ def refine(prep: Prepared, fit: ModelFit) -> Refined:
     row type by one constant sigma, which ignores how the encoder noise's share moves
     with the posture and correlates a frame's rows: unbiased, but (A3-like, clean sets)
     two to three times the offsets error of this fit, which the whitened posterior
-    matches. The problem is nearly linear about the start: one step, then a check."""
+    matches. The problem is nearly linear about the start: one step, then a check.
+    `start`: `fit`'s own `frame_whitening`, if in hand (the first step's)."""
     held = {fit.model.names.index(h) for h in fit.held}
     free = [i for i in range(fit.model.n) if i not in held]
     x = np.array(fit.x, dtype=float)
     n_q = fit.model.n_offsets
     converged = False
     for n_steps in range(1, REFINE_MAX_STEPS + 1):
-        z, Jw_all, rank = _whitened(prep, replace(fit, x=x.copy(), q_ref=x[:n_q].copy()))
+        z, Jw_all, rank = _whitened(prep, replace(fit, x=x.copy(), q_ref=x[:n_q].copy()),
+                                    start if n_steps == 1 else None)
         Jw = Jw_all[:, :fit.model.n]
         A = Jw[:, free]
         step = np.linalg.lstsq(A, z, rcond=None)[0]
