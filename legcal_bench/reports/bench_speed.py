@@ -144,7 +144,7 @@ def install_baseline(rev: str, work: Path) -> Path:
     pyproject = src / "pyproject.toml"
     config = tomllib.loads(pyproject.read_text()) if pyproject.is_file() else {}
     mapped = config.get("tool", {}).get("setuptools", {}).get("package-dir", {})
-    links = [_metadata(src, config.get("project", {}))]
+    links = [_metadata(src)]
     for package, folder in mapped.items():
         parent, _, name = package.rpartition(".")
         link = src / parent.replace(".", "/") / name
@@ -156,21 +156,18 @@ def install_baseline(rev: str, work: Path) -> Path:
     return src
 
 
-def _metadata(src: Path, project: dict) -> str:
-    """The clone's own package metadata (a dist-info beside its packages, what an install
-    would write): its entry points (calibrators, effects) are found before the code at
-    hand's, whose names a baseline may not have. Returns its folder's name."""
-    name = project.get("name", "legcal-bench").replace("-", "_")
-    folder = src / f"{name}-{project.get('version', '0')}.dist-info"
-    folder.mkdir()
-    (folder / "METADATA").write_text(f"Metadata-Version: 2.1\nName: {project.get('name', 'legcal-bench')}\n"
-                                     f"Version: {project.get('version', '0')}\n")
-    groups = {**({"console_scripts": project["scripts"]} if "scripts" in project else {}),
-              **project.get("entry-points", {})}
-    (folder / "entry_points.txt").write_text("".join(
-        f"[{group}]\n" + "".join(f"{k} = {v}\n" for k, v in points.items()) + "\n"
-        for group, points in groups.items()))
-    return folder.name
+def _metadata(src: Path) -> str:
+    """The clone's own package metadata, written by its build back end (PEP 517's
+    `prepare_metadata_for_build_wheel`: the dist-info an install would have) beside its
+    packages: its entry points (calibrators, effects) are then found before the code at
+    hand's, whose names a baseline may not have. Returns the dist-info folder's name."""
+    out = subprocess.run([sys.executable, "-c", "from setuptools import build_meta; "
+                          "print(build_meta.prepare_metadata_for_build_wheel('.'))"],
+                         cwd=src, capture_output=True, text=True, check=False)
+    if out.returncode != 0:
+        raise ConfigError(f"bench-speed --baseline: the baseline's package metadata could not be built:\n"
+                          f"{out.stderr[-2000:]}")
+    return out.stdout.strip().splitlines()[-1]
 
 
 def run_probe(group: str, repeats: int, pythonpath: Path | None, data: str, robot: str, src: Path) -> dict:
@@ -291,11 +288,11 @@ def run_bench_speed(out: str | Path, robot: str = "a3", repeats: int | None = No
             collect(CollectConfig(robot=robot, mode="weld", sensors="realistic"), data, progress=False)
             for path in list_segments(data):  # the format both read (a baseline before #39 reads version 1)
                 load_recording(path).save(path, version=1)
-        site = src = None if baseline == "none" else install_baseline(baseline, tmp / "baseline")
+        clone = None if baseline == "none" else install_baseline(baseline, tmp / "baseline")
         for k in range(rounds):
             for group in groups:
                 n = repeats or GROUPS[group][2]
-                sides = [("old", site, src), ("new", None, root)]
+                sides = [("old", clone, clone), ("new", None, root)]  # (side, PYTHONPATH, source tree)
                 for side, path, tree in (sides if k % 2 == 0 else sides[::-1]):
                     if (side == "old" and path is None) or partial.has(k, group, side):
                         continue

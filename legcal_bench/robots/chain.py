@@ -58,7 +58,8 @@ class FactorChain:
 
         Batched per side: the joints' exponentials in one call, the factors' (the same
         for every frame) and their right Jacobians in one, the constant elements applied
-        by broadcasting, and Ad(B_i^-1) of every exponential element in one call."""
+        by broadcasting, and Ad(B_i^-1) applied to each element's twists without forming
+        the 6x6 adjoints (`_moved`)."""
         Q = np.atleast_2d(np.asarray(Q, dtype=float))
         p = np.asarray(p, dtype=float)
         n = len(Q)

@@ -48,7 +48,7 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
         dq, _ = problem.solve(dq0, prep.options)
         start = None  # at another point
     final: dict[str, StanceContact] = {}
-    items, scale = _stance_items(prep, problem, dq, sig, start), 1.0
+    items, scale = _stance_items(prep, problem, dq, start), 1.0
     while True:
         raw, worst = check_stances(items, sig["encoder"]), None
         # judged at the shared misfit of the stances other than the worst; that scale is
@@ -59,7 +59,7 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
         elif len(raw) >= 3:
             # the least consistent stance (log p, then chi2/dof where log p underflows too)
             worst = min(raw, key=lambda c: (chi2_logsf(c.chi2, c.dof), -c.chi2 / c.dof)).recording
-            sub, dq_sub, sub_items = _without(prep, problem, dq, sig, worst, weights)
+            sub, dq_sub, sub_items = _without(prep, problem, dq, worst, weights)
             scale = shared_misfit([c.chi2 / c.dof for c in check_stances(sub_items, sig["encoder"])])
         results = raw if scale == 1.0 else check_stances(items, sig["encoder"], scale=scale)
         bad = [c for c in results if c.flagged]
@@ -69,18 +69,18 @@ def contact_check(prep: Prepared, segments: list[Segment], dq0: np.ndarray,
         flagged = max(bad, key=lambda c: c.chi2)
         final[flagged.recording] = flagged
         if flagged.recording != worst:
-            sub, dq_sub, sub_items = _without(prep, problem, dq, sig, flagged.recording, weights)
+            sub, dq_sub, sub_items = _without(prep, problem, dq, flagged.recording, weights)
         problem, dq, items = sub, dq_sub, sub_items
     return [final[n] for n in dict.fromkeys(s.recording for s in segments)]
 
 
-def _without(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict, name: str, weights):
+def _without(prep: Prepared, problem: StanceProblem, dq: np.ndarray, name: str, weights):
     """(problem, offsets, stance items) of `problem` without the stance `name`, solved
     from `dq`."""
     sub = StanceProblem(prep.kin, [s for s in problem.segments if s.recording != name], weights, None, [],
                         prep.options.bound)
     dq_sub, _ = sub.solve(dq, prep.options)
-    return sub, dq_sub, _stance_items(prep, sub, dq_sub, sig)
+    return sub, dq_sub, _stance_items(prep, sub, dq_sub)
 
 
 def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) -> list[StanceContact] | None:
@@ -97,7 +97,7 @@ def recordings_contact_check(legmap, recordings, dq0: np.ndarray | None = None) 
     return contact_check(prep, problem.segments, dq, solved=True)
 
 
-def _stance_items(prep: Prepared, problem: StanceProblem, dq: np.ndarray, sig: dict,
+def _stance_items(prep: Prepared, problem: StanceProblem, dq: np.ndarray,
                   start: FrameWhitening | None = None) -> list[dict]:
     """`check_stances`'s input of each segment: its departure from one plane at the
     offsets of the other stances, and their covariance. The others' offsets come with a fixed error of the IMU's vertical as a nuisance, within the

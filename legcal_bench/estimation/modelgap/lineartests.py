@@ -21,6 +21,7 @@ times C's largest singular value.
 from __future__ import annotations
 
 import numpy as np
+from scipy.linalg import qr_multiply
 
 RANK_RTOL = 1e-8
 
@@ -55,8 +56,6 @@ def score_beyond(z: np.ndarray, Qn: np.ndarray, C: np.ndarray, resolution: float
     triangle R: the SVD of the residue itself, computed in about 0.4x the time (the tall
     U of a direct SVD is the cost). C's largest singular value, which scales the rank
     floor, from its Gram matrix (relative error ~1e-16, far below the floor's 1e-8)."""
-    from scipy.linalg import qr_multiply
-
     if C.shape[1] == 0 or not np.abs(C).max(initial=0.0) > 0:
         return 0.0, 0
     Cp = C - Qn @ (Qn.T @ C)
